@@ -1,0 +1,64 @@
+"""Atomic file output: write to a temporary file beside the target, then rename.
+
+A failed or interrupted run therefore never leaves a half-written output behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import soundfile as sf
+
+
+@contextlib.contextmanager
+def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path in the target's folder; rename it onto ``target`` on success.
+
+    The temporary file keeps the target's suffix so that format sniffing by suffix still
+    works. On any exception the temporary file is removed and the target is left untouched.
+    """
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}",
+                                    dir=target.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_json(target: str | os.PathLike, data: object) -> None:
+    """Write ``data`` as indented UTF-8 JSON to ``target`` atomically."""
+    with atomic_path(target) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+
+
+def write_wav(target: str | os.PathLike, samples: np.ndarray, rate: int,
+              subtype: str = "FLOAT") -> None:
+    """Write ``samples`` (frames, or frames × channels; full scale ±1) at ``rate`` Hz atomically.
+
+    ``subtype`` is a soundfile subtype; the default 32-bit float keeps the samples exactly.
+    """
+    with atomic_path(target) as tmp:
+        sf.write(tmp, np.asarray(samples, dtype=np.float32), int(rate), subtype=subtype,
+                 format="WAV")
+
+
+def sha256_of(path: str | os.PathLike) -> str:
+    """SHA-256 hex digest of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

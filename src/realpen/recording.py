@@ -1,0 +1,295 @@
+"""Recordings of pen vibration: loading, saving, DFT321, resampling and the high-pass filter.
+
+A :class:`Recording` is a block of samples (frames × axes) with its rate, axis names, units and
+provenance. Loaders accept WAV/FLAC/OGG (any PCM or float subtype, any channel count), CSV (a
+header row, an optional time column) and NPZ.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from dataclasses import dataclass, field, replace
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import soundfile as sf
+from scipy import signal
+
+from .errors import RealPenError, fail
+from .fileio import atomic_path, sha256_of
+
+TIME_COLUMNS = ("t", "time", "timestamp")
+AXIS_CHOICES = ("dft321", "x", "y", "z", "magnitude")
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Samples of one recording.
+
+    Attributes:
+        samples: float64 array, shape (frames, axes).
+        rate: sampling rate in Hz.
+        axes: one name per column of ``samples`` (e.g. ``("x", "y", "z")``).
+        units: physical unit of the samples (``"m/s^2"``, ``"g"``, ``"full scale"``...).
+        source: where the samples came from (a file path, or a description).
+        sha256: SHA-256 of the source file's bytes, when there is one.
+        history: processing steps applied since loading, oldest first.
+    """
+
+    samples: np.ndarray
+    rate: float
+    axes: tuple[str, ...]
+    units: str = "arbitrary"
+    source: str = "memory"
+    sha256: str | None = None
+    history: tuple[str, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        samples = np.asarray(self.samples, dtype=np.float64)
+        if samples.ndim == 1:
+            samples = samples[:, None]
+        object.__setattr__(self, "samples", samples)
+        if samples.ndim != 2 or samples.shape[1] != len(self.axes):
+            raise ValueError(f"samples of shape {samples.shape} do not match axes {self.axes}")
+
+    @property
+    def duration(self) -> float:
+        """Length in seconds."""
+        return self.samples.shape[0] / self.rate
+
+    @property
+    def mono(self) -> np.ndarray:
+        """The single axis of a one-axis recording, shape (frames,)."""
+        if self.samples.shape[1] != 1:
+            raise ValueError("recording has more than one axis; combine them first")
+        return self.samples[:, 0]
+
+    def with_samples(self, samples: np.ndarray, step: str, **changes) -> "Recording":
+        """A copy with new samples and one more entry in ``history``."""
+        return replace(self, samples=samples, history=self.history + (step,), **changes)
+
+
+def _check_finite(samples: np.ndarray, source: str) -> None:
+    bad = ~np.isfinite(samples)
+    if bad.any():
+        first = int(np.argwhere(bad)[0][0])
+        raise fail(source, f"contains NaN or infinite values (first at frame {first})")
+
+
+def _open_checked(path: Path) -> None:
+    if not path.exists():
+        raise fail(path, "no such file")
+    if path.is_dir():
+        raise fail(path, "is a folder, not a file")
+    if path.stat().st_size == 0:
+        raise fail(path, "file is empty")
+
+
+def load_recording(path: str | os.PathLike, rate: float | None = None,
+                   units: str | None = None) -> Recording:
+    """Load a vibration recording from WAV/FLAC/OGG, CSV or NPZ.
+
+    Args:
+        path: the file. The suffix picks the reader (``.csv``, ``.npz``; anything else is read
+            as audio by soundfile).
+        rate: sampling rate in Hz for a CSV with no time column (ignored otherwise unless the
+            file carries no rate at all).
+        units: override the unit of the samples.
+
+    Returns:
+        A :class:`Recording` with ``source`` and ``sha256`` set.
+
+    Raises:
+        RealPenError: missing, empty, truncated or unreadable files, NaN/inf samples, a CSV
+            with no time column and no ``rate``.
+    """
+    path = Path(path)
+    _open_checked(path)
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        recording = _load_csv(path, rate)
+    elif suffix == ".npz":
+        recording = _load_npz(path, rate)
+    else:
+        recording = _load_audio(path)
+    if recording.samples.shape[0] == 0:
+        raise fail(path, "holds no samples")
+    _check_finite(recording.samples, str(path))
+    return replace(recording, source=str(path), sha256=sha256_of(path),
+                   units=units or recording.units)
+
+
+def _load_audio(path: Path) -> Recording:
+    try:
+        with sf.SoundFile(path) as handle:
+            expected = handle.frames
+            data = handle.read(dtype="float64", always_2d=True)
+            rate = handle.samplerate
+    except (sf.LibsndfileError, RuntimeError, TypeError, ValueError) as error:
+        reason = str(error).split("\n")[0]
+        raise fail(path, f"not a readable audio file ({reason})") from None
+    if data.shape[0] < expected:
+        raise fail(path, f"truncated: header promises {expected} frames, file holds {data.shape[0]}")
+    channels = data.shape[1]
+    axes = ("x", "y", "z")[:channels] if channels <= 3 else tuple(f"ch{i}" for i in range(channels))
+    return Recording(data, float(rate), axes, units="full scale")
+
+
+def _load_csv(path: Path, rate: float | None) -> Recording:
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise fail(path, "not a text CSV file") from None
+    lines = [line for line in text.splitlines() if line.strip()]
+    if len(lines) < 2:
+        raise fail(path, "CSV needs a header row and at least one row of values")
+    try:
+        dialect = csv.Sniffer().sniff("\n".join(lines[:20]), delimiters=",;\t ")
+    except csv.Error:
+        dialect = csv.excel
+    rows = list(csv.reader(io.StringIO("\n".join(lines)), dialect))
+    header = [name.strip() for name in rows[0]]
+    try:
+        values = np.array([[float(cell) for cell in row] for row in rows[1:]], dtype=np.float64)
+    except ValueError as error:
+        raise fail(path, f"CSV has a non-numeric value ({error})") from None
+    if values.ndim != 2 or values.shape[1] != len(header):
+        raise fail(path, f"CSV rows do not all have the {len(header)} columns of the header")
+    lowered = [name.lower() for name in header]
+    time_index = next((lowered.index(name) for name in TIME_COLUMNS if name in lowered), None)
+    if time_index is not None:
+        times = values[:, time_index]
+        steps = np.diff(times)
+        if len(steps) == 0 or not np.all(steps > 0):
+            raise fail(path, f"time column '{header[time_index]}' is not strictly increasing")
+        rate = 1.0 / float(np.median(steps))
+        values = np.delete(values, time_index, axis=1)
+        header = header[:time_index] + header[time_index + 1:]
+    elif rate is None:
+        raise fail(path, "CSV has no time column (t, time or timestamp); give the rate with --rate")
+    if values.shape[1] == 0:
+        raise fail(path, "CSV has no signal columns")
+    if rate <= 0:
+        raise fail(path, f"rate must be positive, got {rate}")
+    return Recording(values, float(rate), tuple(header))
+
+
+def _load_npz(path: Path, rate: float | None) -> Recording:
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            contents = {key: archive[key] for key in archive.files}
+    except (OSError, ValueError, EOFError) as error:
+        raise fail(path, f"not a readable NPZ archive ({error})") from None
+    key = next((k for k in ("samples", "data", "acc", "acceleration") if k in contents), None)
+    if key is None:
+        raise fail(path, "NPZ has no 'samples' array")
+    samples = np.asarray(contents[key], dtype=np.float64)
+    if samples.ndim == 1:
+        samples = samples[:, None]
+    if samples.ndim != 2:
+        raise fail(path, f"'samples' must be 1-D or 2-D, got shape {samples.shape}")
+    if "rate" in contents:
+        rate = float(contents["rate"])
+    elif rate is None:
+        raise fail(path, "NPZ has no 'rate'; give the rate with --rate")
+    axes = tuple(str(a) for a in contents["axes"]) if "axes" in contents else (
+        ("x", "y", "z")[:samples.shape[1]] if samples.shape[1] <= 3
+        else tuple(f"ch{i}" for i in range(samples.shape[1])))
+    if len(axes) != samples.shape[1]:
+        raise fail(path, f"NPZ names {len(axes)} axes for {samples.shape[1]} columns")
+    units = str(contents["units"]) if "units" in contents else "arbitrary"
+    return Recording(samples, rate, axes, units=units)
+
+
+def save_npz(recording: Recording, path: str | os.PathLike) -> None:
+    """Save a recording as NPZ (``samples``, ``rate``, ``axes``, ``units``) atomically."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as handle:
+            np.savez_compressed(handle, samples=recording.samples.astype(np.float32),
+                                rate=recording.rate, axes=np.array(recording.axes),
+                                units=recording.units)
+
+
+def dft321(samples: np.ndarray) -> np.ndarray:
+    """Combine axes into one signal by DFT321 (Landin et al., 2010).
+
+    Per frequency bin the result has magnitude √Σ|U_i|² and the phase of ΣU_i, so the summed
+    spectral energy of the axes is kept exactly.
+
+    Args:
+        samples: shape (frames, axes).
+
+    Returns:
+        shape (frames,), same unit as the input.
+    """
+    samples = np.asarray(samples, dtype=np.float64)
+    frames = samples.shape[0]
+    spectra = np.fft.rfft(samples, axis=0)
+    magnitude = np.sqrt(np.sum(spectra.real ** 2 + spectra.imag ** 2, axis=1))
+    phase = np.angle(np.sum(spectra, axis=1))
+    return np.fft.irfft(magnitude * np.exp(1j * phase), n=frames)
+
+
+def combine_axes(recording: Recording, axis: str | None = None) -> Recording:
+    """Reduce a recording to one axis.
+
+    Args:
+        axis: ``"dft321"`` (default for more than one axis), ``"magnitude"`` (Euclidean norm
+            per frame, mean removed), or an axis name (``"x"``, ``"y"``, ``"z"``...).
+    """
+    count = recording.samples.shape[1]
+    if axis is None:
+        axis = "dft321" if count > 1 else recording.axes[0]
+    if axis == "dft321":
+        combined = dft321(recording.samples) if count > 1 else recording.samples[:, 0]
+    elif axis == "magnitude":
+        combined = np.linalg.norm(recording.samples, axis=1)
+        combined = combined - combined.mean()
+    elif axis in recording.axes:
+        combined = recording.samples[:, recording.axes.index(axis)]
+    else:
+        raise fail(recording.source, f"no axis '{axis}' (axes: {', '.join(recording.axes)}; "
+                                     f"or dft321, magnitude)")
+    return recording.with_samples(combined[:, None], f"axis:{axis}", axes=(axis,))
+
+
+def resample(recording: Recording, rate: float) -> Recording:
+    """Resample to ``rate`` Hz with a polyphase filter (scipy.signal.resample_poly)."""
+    if abs(rate - recording.rate) < 1e-9:
+        return recording
+    ratio = Fraction(rate / recording.rate).limit_denominator(1000)
+    out = signal.resample_poly(recording.samples, ratio.numerator, ratio.denominator, axis=0)
+    actual = recording.rate * ratio.numerator / ratio.denominator
+    return recording.with_samples(out, f"resample:{actual:g}Hz", rate=actual)
+
+
+def highpass(recording: Recording, cutoff_hz: float = 30.0, order: int = 4) -> Recording:
+    """Zero-phase Butterworth high-pass (forward-backward, so the effective order is doubled).
+
+    Raises:
+        RealPenError: when the rate is too low for the cutoff (Nyquist at or below it).
+    """
+    nyquist = recording.rate / 2
+    if cutoff_hz <= 0:
+        return recording
+    if cutoff_hz >= nyquist:
+        raise fail(recording.source, f"rate {recording.rate:g} Hz is too low for a "
+                                     f"{cutoff_hz:g} Hz high-pass (Nyquist {nyquist:g} Hz)")
+    sos = signal.butter(order, cutoff_hz, btype="highpass", fs=recording.rate, output="sos")
+    padlen = min(3 * (2 * len(sos) + 1), recording.samples.shape[0] - 1)
+    filtered = signal.sosfiltfilt(sos, recording.samples, axis=0, padlen=max(padlen, 0))
+    return recording.with_samples(filtered, f"highpass:{cutoff_hz:g}Hz")
+
+
+def prepare(recording: Recording, axis: str | None = None, rate: float | None = None,
+            highpass_hz: float = 30.0) -> Recording:
+    """The method's preprocessing: axes to one, optional resampling, zero-phase high-pass."""
+    if axis is not None and axis not in AXIS_CHOICES and axis not in recording.axes:
+        raise RealPenError(f"--axis: unknown axis '{axis}' (choose from {', '.join(AXIS_CHOICES)})")
+    one = combine_axes(recording, axis)
+    if rate is not None:
+        one = resample(one, rate)
+    return highpass(one, highpass_hz)

@@ -1,0 +1,237 @@
+"""Unit sequences, their power spectra, principal frequencies, and the choice of units to use.
+
+The method splits the (one-axis, high-passed) vibration into unit sequences of 100 ms and keeps
+the top-N principal frequencies of each. Here a principal frequency is a spectral *peak*: a
+local maximum that is also the largest value within ± ``min_separation_hz``, located to a
+fraction of a bin by parabolic interpolation of the log power, so one broad peak never fills
+several of the N places.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy import signal
+from scipy.ndimage import maximum_filter1d
+
+from .errors import RealPenError
+
+ProgressCallback = Callable[[int, int], None]
+SELECTIONS = ("stationary", "middle")
+FEATURE_BANDS = 24
+PEAK_FLOOR_DB = -80.0  # relative to the strongest peak of the unit; below is numerical noise
+_TINY = 1e-30
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """Principal frequencies of every unit sequence of a recording, and the units selected.
+
+    Attributes:
+        rate: analysis rate in Hz.
+        unit_ms: unit length in milliseconds.
+        top: how many principal frequencies were asked for per unit.
+        starts_s: start time of each unit in seconds, shape (units,).
+        frequencies_hz: shape (units, top), strongest first; NaN where a unit has fewer peaks.
+        powers: mean-square power of each peak (signal unit squared), same shape; NaN likewise.
+            A sinusoid of amplitude A has power A²/2.
+        band_levels_db: coarse band levels per unit (units, bands), used to judge stationarity.
+        selected: indices of the units chosen for the pattern, consecutive.
+        selection: ``"stationary"`` or ``"middle"``.
+    """
+
+    rate: float
+    unit_ms: float
+    top: int
+    starts_s: np.ndarray
+    frequencies_hz: np.ndarray
+    powers: np.ndarray
+    band_levels_db: np.ndarray
+    selected: np.ndarray
+    selection: str
+
+    def unit(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """(frequencies in Hz, powers) of one unit, NaN entries dropped, strongest first."""
+        keep = np.isfinite(self.frequencies_hz[index])
+        return self.frequencies_hz[index][keep], self.powers[index][keep]
+
+    def to_json(self) -> dict:
+        """The ``realpen analyze --json`` document."""
+        units = []
+        for index, start in enumerate(self.starts_s):
+            freqs, powers = self.unit(index)
+            units.append({"start_s": round(float(start), 6),
+                          "frequencies_hz": [round(float(f), 4) for f in freqs],
+                          "powers": [float(p) for p in powers]})
+        return {"rate": self.rate, "unit_ms": self.unit_ms, "top": self.top,
+                "selection": self.selection, "units": units,
+                "selected": [int(i) for i in self.selected]}
+
+
+def fft_size(unit_samples: int) -> int:
+    """Zero-padded FFT length for a unit: the power of two ≥ 8 × its length (and ≥ 256)."""
+    return max(256, 1 << int(np.ceil(np.log2(8 * unit_samples))))
+
+
+def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10,
+                          fmin: float = 30.0, fmax: float | None = None,
+                          min_separation_hz: float | None = None,
+                          progress: ProgressCallback | None = None
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Top-N spectral peaks of every unit sequence of a one-axis signal.
+
+    Args:
+        x: signal, shape (frames,).
+        rate: sampling rate in Hz.
+        unit_ms: unit length in ms; the tail that does not fill a unit is ignored.
+        top: peaks kept per unit (N).
+        fmin, fmax: band in Hz where peaks count (fmax defaults to Nyquist).
+        min_separation_hz: two peaks closer than this are one peak (default: one bin of the
+            unwindowed unit, 1000 / unit_ms Hz).
+        progress: called as ``progress(units_done, units_total)``.
+
+    Returns:
+        ``(starts_s, frequencies_hz, powers, band_levels_db)`` as described in :class:`Analysis`.
+    """
+    unit_samples = int(round(unit_ms * rate / 1000.0))
+    if unit_samples < 8:
+        raise RealPenError(f"--unit-ms: {unit_ms:g} ms is only {unit_samples} samples at "
+                           f"{rate:g} Hz; use longer units")
+    count = len(x) // unit_samples
+    nyquist = rate / 2
+    fmax = nyquist if fmax is None else min(fmax, nyquist)
+    nfft = fft_size(unit_samples)
+    freqs = np.fft.rfftfreq(nfft, 1.0 / rate)
+    bin_hz = freqs[1]
+    separation = 1000.0 / unit_ms if min_separation_hz is None else min_separation_hz
+    half_width = max(1, int(round(separation / bin_hz)))
+    in_band = (freqs >= fmin) & (freqs <= fmax)
+    band_edges = np.searchsorted(freqs, np.linspace(fmin, fmax, FEATURE_BANDS + 1)[:-1])
+    window = signal.get_window("hann", unit_samples)
+    scale = 2.0 / window.sum() ** 2  # |X|² → mean-square power of a sinusoid (A²/2)
+
+    starts = np.arange(count) * unit_samples / rate
+    out_freqs = np.full((count, top), np.nan)
+    out_powers = np.full((count, top), np.nan)
+    bands = np.zeros((count, FEATURE_BANDS))
+    frames = x[:count * unit_samples].reshape(count, unit_samples)
+    chunk = max(1, 4_000_000 // nfft)
+    for first in range(0, count, chunk):
+        block = frames[first:first + chunk]
+        block = block - block.mean(axis=1, keepdims=True)
+        spectrum = np.fft.rfft(block * window, n=nfft, axis=1)
+        power = (spectrum.real ** 2 + spectrum.imag ** 2) * scale
+        peaks_f, peaks_p = _top_peaks(power, in_band, half_width, top, bin_hz)
+        out_freqs[first:first + len(block)] = peaks_f
+        out_powers[first:first + len(block)] = peaks_p
+        band_power = np.add.reduceat(power[:, in_band.argmax():], band_edges - in_band.argmax(),
+                                     axis=1) if in_band.any() else np.zeros((len(block), 1))
+        bands[first:first + len(block)] = 10 * np.log10(band_power[:, :FEATURE_BANDS] + _TINY)
+        if progress is not None:
+            progress(min(first + chunk, count), count)
+    return starts, out_freqs, out_powers, bands
+
+
+def _top_peaks(power: np.ndarray, in_band: np.ndarray, half_width: int, top: int,
+               bin_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Strongest ``top`` peaks per row with parabolic (log-power) sub-bin interpolation."""
+    rows, bins = power.shape
+    neighbourhood = maximum_filter1d(power, size=2 * half_width + 1, axis=1, mode="constant",
+                                     cval=0.0)
+    rising = np.zeros_like(in_band, shape=power.shape)
+    rising[:, 1:] = power[:, 1:] > power[:, :-1]
+    strongest = power.max(axis=1, keepdims=True)
+    floor = np.maximum(strongest * 10 ** (PEAK_FLOOR_DB / 10), _TINY)
+    is_peak = (power >= neighbourhood) & rising & in_band[None, :] & (power > floor)
+    is_peak[:, 0] = is_peak[:, -1] = False
+    candidates = np.where(is_peak, power, -np.inf)
+    take = min(top, bins)
+    index = np.argpartition(-candidates, take - 1, axis=1)[:, :take]
+    order = np.argsort(-np.take_along_axis(candidates, index, axis=1), axis=1)
+    index = np.take_along_axis(index, order, axis=1)
+    valid = np.isfinite(np.take_along_axis(candidates, index, axis=1))
+    log_power = 10 * np.log10(power + _TINY)
+    row = np.arange(rows)[:, None]
+    safe = np.clip(index, 1, bins - 2)
+    alpha, beta, gamma = (log_power[row, safe - 1], log_power[row, safe],
+                          log_power[row, safe + 1])
+    curvature = alpha - 2 * beta + gamma
+    offset = np.where(curvature < 0, 0.5 * (alpha - gamma) / np.where(curvature < 0, curvature, -1),
+                      0.0)
+    offset = np.clip(offset, -0.5, 0.5)
+    peak_db = beta - 0.25 * (alpha - gamma) * offset
+    frequencies = np.where(valid, (safe + offset) * bin_hz, np.nan)
+    powers = np.where(valid, 10 ** (peak_db / 10), np.nan)
+    if take < top:
+        pad = np.full((rows, top - take), np.nan)
+        frequencies, powers = np.hstack([frequencies, pad]), np.hstack([powers, pad])
+    return frequencies, powers
+
+
+def select_units(band_levels_db: np.ndarray, count: int, method: str = "stationary") -> np.ndarray:
+    """Choose ``count`` consecutive units, never the first or the last.
+
+    ``"stationary"`` takes the run whose band levels vary least around the run's own mean
+    (sum over bands of the variance across units, in dB²); ``"middle"`` takes the run centred
+    in the recording, as the method describes.
+
+    Returns:
+        The unit indices, ascending.
+
+    Raises:
+        RealPenError: fewer than ``count + 2`` units, or an unknown method.
+    """
+    if method not in SELECTIONS:
+        raise RealPenError(f"--select: unknown selection '{method}' "
+                           f"(choose from {', '.join(SELECTIONS)})")
+    total = band_levels_db.shape[0]
+    usable = total - 2
+    if usable < count:
+        raise RealPenError(f"too short: {total} units, but {count} consecutive units plus the "
+                           f"dropped first and last need {count + 2}")
+    if method == "middle":
+        first = 1 + (usable - count) // 2
+        return np.arange(first, first + count)
+    inner = band_levels_db[1:-1]
+    csum = np.vstack([np.zeros((1, inner.shape[1])), np.cumsum(inner, axis=0)])
+    csum2 = np.vstack([np.zeros((1, inner.shape[1])), np.cumsum(inner ** 2, axis=0)])
+    mean = (csum[count:] - csum[:-count]) / count
+    mean_sq = (csum2[count:] - csum2[:-count]) / count
+    variance = np.maximum(mean_sq - mean ** 2, 0.0).sum(axis=1)
+    first = 1 + int(np.argmin(variance))
+    return np.arange(first, first + count)
+
+
+def analyze(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10, count: int = 15,
+            selection: str = "stationary", fmin: float = 30.0, fmax: float | None = None,
+            min_separation_hz: float | None = None, source: str = "signal",
+            progress: ProgressCallback | None = None) -> Analysis:
+    """Principal frequencies of every unit, and the ``count`` consecutive units to use.
+
+    ``x`` should already be one axis and high-passed (see :func:`realpen.recording.prepare`).
+
+    Raises:
+        RealPenError: a silent or constant signal (no peaks), or a signal too short for
+            ``count + 2`` units.
+    """
+    if top < 1:
+        raise RealPenError(f"--top must be at least 1, got {top}")
+    if count < 1:
+        raise RealPenError(f"--subpatterns must be at least 1, got {count}")
+    if not np.any(np.abs(x) > 1e-12 * max(1.0, float(np.max(np.abs(x), initial=0.0)))):
+        raise RealPenError(f"{source}: signal is silent or constant (no spectral peaks)")
+    unit_samples = int(round(unit_ms * rate / 1000.0))
+    units = len(x) // max(unit_samples, 1)
+    if units < count + 2:
+        raise RealPenError(
+            f"{source}: too short: {len(x) / rate:.3f} s holds {units} units of {unit_ms:g} ms; "
+            f"{count} units plus the dropped first and last need {(count + 2) * unit_ms / 1000:g} s")
+    starts, freqs, powers, bands = principal_frequencies(
+        x, rate, unit_ms, top, fmin, fmax, min_separation_hz, progress)
+    selected = select_units(bands, count, selection)
+    if not np.isfinite(freqs[selected]).any():
+        raise RealPenError(f"{source}: no spectral peaks between {fmin:g} Hz and "
+                           f"{fmax or rate / 2:g} Hz in the selected units")
+    return Analysis(rate, unit_ms, top, starts, freqs, powers, bands, selected, selection)
