@@ -174,7 +174,13 @@ def weighting(actuator: Actuator, frequencies_hz: np.ndarray, band_hz: tuple[flo
         band_hz: (low, high) band whose best response defines H_ref (weight 1).
         cap_db: largest boost in dB over the best-responding frequency.
     """
-    grid = np.geomspace(max(band_hz[0], 1e-3), max(band_hz[1], band_hz[0] * 1.001), 2048)
+    low, high = max(band_hz[0], 1e-3), max(band_hz[1], band_hz[0] * 1.001)
+    grid = np.geomspace(low, high, 2048)
+    # The grid alone can miss the exact peak; add the points where a peak can be.
+    extra = [actuator.params.get("f0", low)]
+    if actuator.table_hz is not None:
+        extra.extend(actuator.table_hz)
+    grid = np.concatenate([grid, np.clip(extra, low, high)])
     reference = float(np.max(actuator.response(grid)))
     freqs = np.asarray(frequencies_hz, dtype=np.float64)
     response = actuator.response(np.nan_to_num(freqs, nan=1.0))

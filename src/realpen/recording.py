@@ -10,12 +10,15 @@ from __future__ import annotations
 import csv
 import io
 import os
+import struct
+import zipfile
 from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 import soundfile as sf
+from scipy import fft as sp_fft
 from scipy import signal
 
 from .errors import RealPenError, fail
@@ -133,9 +136,34 @@ def _load_audio(path: Path) -> Recording:
         raise fail(path, f"not a readable audio file ({reason})") from None
     if data.shape[0] < expected:
         raise fail(path, f"truncated: header promises {expected} frames, file holds {data.shape[0]}")
+    missing = _wav_missing_bytes(path)
+    if missing:
+        raise fail(path, f"truncated: the WAV data chunk is {missing} bytes shorter than its header says")
     channels = data.shape[1]
     axes = ("x", "y", "z")[:channels] if channels <= 3 else tuple(f"ch{i}" for i in range(channels))
     return Recording(data, float(rate), axes, units="full scale")
+
+
+def _wav_missing_bytes(path: Path) -> int:
+    """Bytes missing from a RIFF/WAVE data chunk (0 when complete or not a RIFF file).
+
+    libsndfile quietly reads what is there, so a cut-off WAV must be caught from its header.
+    """
+    with open(path, "rb") as handle:
+        head = handle.read(12)
+        if len(head) < 12 or head[:4] != b"RIFF" or head[8:12] != b"WAVE":
+            return 0
+        size = path.stat().st_size
+        while True:
+            chunk = handle.read(8)
+            if len(chunk) < 8:
+                return 0
+            name, length = struct.unpack("<4sI", chunk)
+            if name == b"data":
+                if length in (0, 0xFFFFFFFF):  # streamed WAVs leave the size unset
+                    return 0
+                return max(0, length - (size - handle.tell()))
+            handle.seek(length + (length & 1), os.SEEK_CUR)
 
 
 def _load_csv(path: Path, rate: float | None) -> Recording:
@@ -181,7 +209,7 @@ def _load_npz(path: Path, rate: float | None) -> Recording:
     try:
         with np.load(path, allow_pickle=False) as archive:
             contents = {key: archive[key] for key in archive.files}
-    except (OSError, ValueError, EOFError) as error:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
         raise fail(path, f"not a readable NPZ archive ({error})") from None
     key = next((k for k in ("samples", "data", "acc", "acceleration") if k in contents), None)
     if key is None:
@@ -225,12 +253,16 @@ def dft321(samples: np.ndarray) -> np.ndarray:
     Returns:
         shape (frames,), same unit as the input.
     """
-    samples = np.asarray(samples, dtype=np.float64)
-    frames = samples.shape[0]
-    spectra = np.fft.rfft(samples, axis=0)
-    magnitude = np.sqrt(np.sum(spectra.real ** 2 + spectra.imag ** 2, axis=1))
-    phase = np.angle(np.sum(spectra, axis=1))
-    return np.fft.irfft(magnitude * np.exp(1j * phase), n=frames)
+    axes = np.ascontiguousarray(np.asarray(samples, dtype=np.float64).T)
+    frames = axes.shape[1]
+    spectra = sp_fft.rfft(axes, axis=1)
+    magnitude = np.sqrt(np.sum(spectra.real ** 2 + spectra.imag ** 2, axis=0))
+    summed = spectra.sum(axis=0)
+    summed_magnitude = np.abs(summed)
+    # Where the axes cancel exactly the phase is undefined; take zero phase there.
+    direction = np.divide(summed, summed_magnitude, out=np.ones_like(summed),
+                          where=summed_magnitude > 0)
+    return sp_fft.irfft(magnitude * direction, n=frames)
 
 
 def combine_axes(recording: Recording, axis: str | None = None) -> Recording:

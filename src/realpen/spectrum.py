@@ -152,11 +152,9 @@ def _top_peaks(power: np.ndarray, in_band: np.ndarray, half_width: int, top: int
     order = np.argsort(-np.take_along_axis(candidates, index, axis=1), axis=1)
     index = np.take_along_axis(index, order, axis=1)
     valid = np.isfinite(np.take_along_axis(candidates, index, axis=1))
-    log_power = 10 * np.log10(power + _TINY)
     row = np.arange(rows)[:, None]
     safe = np.clip(index, 1, bins - 2)
-    alpha, beta, gamma = (log_power[row, safe - 1], log_power[row, safe],
-                          log_power[row, safe + 1])
+    alpha, beta, gamma = (10 * np.log10(power[row, safe + shift] + _TINY) for shift in (-1, 0, 1))
     curvature = alpha - 2 * beta + gamma
     offset = np.where(curvature < 0, 0.5 * (alpha - gamma) / np.where(curvature < 0, curvature, -1),
                       0.0)

@@ -8,7 +8,7 @@ from typing import Iterator
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
 
-console = Console()
+console = Console(soft_wrap=True)
 err_console = Console(stderr=True)
 
 PROGRESS_AFTER_S = 5.0  # recordings longer than this get a progress bar

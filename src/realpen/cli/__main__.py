@@ -1,0 +1,5 @@
+"""``python -m realpen.cli`` runs the ``realpen`` command."""
+
+from . import main
+
+main()

@@ -1,0 +1,78 @@
+"""Actuator responses, specs, measured CSVs and the capped weighting."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from realpen.actuator import load_measured, parse_actuator, weighting
+from realpen.errors import RealPenError
+
+
+def test_lra_model_is_a_second_order_bandpass():
+    act = parse_actuator("lra:f0=175,q=8")
+    f = np.geomspace(20, 1000, 200)
+    w0 = 2 * np.pi * 175
+    # Analog band-pass (s/(Q w0)) / (s²/w0² + s/(Q w0) + 1): an independent definition.
+    _, h = signal.freqs([1 / (8 * w0), 0], [1 / w0 ** 2, 1 / (8 * w0), 1], worN=2 * np.pi * f)
+    assert np.allclose(act.response(f), np.abs(h), rtol=1e-9)
+    assert act.response(175.0) == pytest.approx(1.0)
+
+
+def test_piezo_and_flat():
+    piezo = parse_actuator("piezo:f0=300,q=2")
+    assert piezo.response(30.0) < 0.02 and piezo.response(3000.0) == pytest.approx(1, rel=0.02)
+    assert parse_actuator("flat").response(np.array([10.0, 500.0])).tolist() == [1.0, 1.0]
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("lra:f0=abc", "not a number"),
+    ("lra:w=3", "not a parameter"),
+    ("lra:q=-1", "must be positive"),
+    ("voicecoil", "unknown actuator"),
+])
+def test_bad_specs(spec, message):
+    with pytest.raises(RealPenError, match=message):
+        parse_actuator(spec)
+
+
+def test_measured_csv_linear_and_db(tmp_path):
+    linear = tmp_path / "linear.csv"
+    linear.write_text("frequency_hz,response\n50,0.1\n100,0.5\n200,1.0\n400,0.25\n")
+    act = parse_actuator(str(linear))
+    assert act.kind == "measured"
+    assert act.response(200.0) == pytest.approx(1.0)
+    assert act.response(1000.0) == pytest.approx(0.25)  # held beyond the table
+    in_db = tmp_path / "db.csv"
+    in_db.write_text("hz,gain_dB\n50,-20\n200,0\n")
+    assert load_measured(in_db).response(50.0) == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("content, message", [
+    ("", "file is empty"),
+    ("hz,response\n100,1\n", "at least two rows"),
+    ("hz,response\n100,1\n90,1\n", "not strictly increasing"),
+    ("hz,response\n100,1\n200,abc\n", "two numbers"),
+    ("hz,response\n100,1\n200,-1\n", "must be positive"),
+    ("hz,response\n100,1\n200\n", "two numbers"),
+])
+def test_malformed_measured_csv(tmp_path, content, message):
+    path = tmp_path / "actuator.csv"
+    path.write_text(content)
+    with pytest.raises(RealPenError) as info:
+        parse_actuator(str(path))
+    assert str(path) in str(info.value) and message in str(info.value)
+
+
+def test_weighting_equalises_and_caps():
+    act = parse_actuator("lra:f0=175,q=8")
+    freqs = np.array([175.0, 160.0, 190.0, 60.0, np.nan])
+    result = weighting(act, freqs, (30.0, 672.0), cap_db=20)
+    assert result.weights[0] == pytest.approx(1.0)
+    unclipped = ~result.clipped & np.isfinite(freqs)
+    product = result.weights[unclipped] * act.response(freqs[unclipped])
+    assert np.allclose(product, 1.0)  # equal output strength where the cap is not active
+    assert result.clipped.tolist() == [False, False, False, True, False]
+    assert result.weights[3] == pytest.approx(10.0)
+    assert np.isnan(result.weights[4])

@@ -1,0 +1,123 @@
+"""`realpen analyze` and `realpen tactile` end to end, bad input included."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from conftest import assert_clean_failure, run_cli
+from realpen.examples import example_recording_path
+from signals import sines
+
+EXAMPLE = example_recording_path()
+
+
+def test_analyze_prints_summary_and_writes_json(tmp_path):
+    out = tmp_path / "analysis.json"
+    result = run_cli("analyze", EXAMPLE, "--top", "5", "--json", out)
+    assert result.returncode == 0, result.stderr
+    assert "120 units of 100 ms" in result.stdout
+    doc = json.loads(out.read_text())
+    assert doc["rate"] == 1344 and doc["unit_ms"] == 100
+    assert len(doc["units"]) == 120 and len(doc["selected"]) == 15
+    assert 0 not in doc["selected"] and 119 not in doc["selected"]
+    assert np.all(np.diff(doc["selected"]) == 1)
+    assert all(len(u["frequencies_hz"]) == 5 == len(u["powers"]) for u in doc["units"])
+
+
+def test_tactile_writes_pattern_and_json(tmp_path):
+    wav, js = tmp_path / "pattern.wav", tmp_path / "pattern.json"
+    result = run_cli("tactile", EXAMPLE, "--actuator", "lra:f0=175,q=8", "--condition", "B",
+                     "-o", wav, "--json", js, "--seed", "3")
+    assert result.returncode == 0, result.stderr
+    samples, rate = sf.read(wav)
+    assert rate == 8000 and len(samples) == 12000
+    doc = json.loads(js.read_text())
+    assert doc["source"]["sha256"] == hashlib.sha256(EXAMPLE.read_bytes()).hexdigest()
+    assert doc["parameters"]["condition"] == "B" and doc["parameters"]["seed"] == 3
+    assert len(doc["subpatterns"]) == 15
+    component = doc["subpatterns"][0][0]
+    assert set(component) == {"frequency_hz", "power", "weight", "amplitude", "phase", "clipped"}
+    # The JSON is enough to rebuild the WAV.
+    t = np.arange(800) / 8000
+    middle = slice(40, 760)  # away from the crossfades
+    sub = doc["subpatterns"][2]
+    rebuilt = sum(c["amplitude"] * np.sin(2 * np.pi * c["frequency_hz"] * t + c["phase"]) for c in sub)
+    assert np.allclose(samples[1600:2400][middle], rebuilt[middle], atol=1e-6)
+
+
+def test_tactile_on_wav_and_csv_inputs(tmp_path):
+    x = sines([90, 180, 350], [1, 0.6, 0.3], 1344, 2.5, noise=0.01)
+    wav = tmp_path / "rec.wav"
+    sf.write(wav, np.column_stack([x, 0.5 * x, 0.2 * x]), 1344, subtype="PCM_16")
+    csv = tmp_path / "rec.csv"
+    csv.write_text("ax;ay\n" + "\n".join(f"{v:.6f};{-v:.6f}" for v in x))
+    assert run_cli("tactile", wav, "-o", tmp_path / "a.wav").returncode == 0
+    result = run_cli("tactile", csv, "--input-rate", "1344", "--axis", "ax", "-o", tmp_path / "b.wav")
+    assert result.returncode == 0, result.stderr
+
+
+def write_case(tmp_path, case):
+    """Make the bad input of one case; return (arguments, text the message must name)."""
+    good_pattern = ["-o", tmp_path / "out.wav", "--json", tmp_path / "out.json"]
+    rec = tmp_path / "rec.wav"
+    if case == "missing":
+        return ["tactile", tmp_path / "nope.wav", *good_pattern], "nope.wav"
+    if case == "empty":
+        rec.write_bytes(b"")
+    elif case == "truncated":
+        sf.write(rec, np.zeros(5000), 1344, subtype="PCM_16")
+        rec.write_bytes(rec.read_bytes()[:3000])
+    elif case == "not_audio":
+        rec.write_text("hello\n" * 100)
+    elif case == "nan":
+        rec = tmp_path / "rec.csv"
+        rec.write_text("t,x\n" + "\n".join(f"{i / 1344},{'nan' if i == 50 else 1}" for i in range(4000)))
+    elif case in ("short", "silent", "constant", "low_rate", "bad_actuator_csv",
+                  "non_monotonic_actuator", "unknown_condition"):
+        rate = 40 if case == "low_rate" else 1344
+        duration = 1.0 if case == "short" else 3.0
+        x = sines([100], [1], rate, duration) if case not in ("silent", "constant") else np.zeros(int(rate * duration))
+        if case == "constant":
+            x = x + 0.5
+        sf.write(rec, x, rate, subtype="FLOAT")
+        if case == "bad_actuator_csv":
+            act = tmp_path / "act.csv"
+            act.write_text("hz,response\n100,one\n200,1\n")
+            return ["tactile", rec, "--actuator", act, *good_pattern], "act.csv"
+        if case == "non_monotonic_actuator":
+            act = tmp_path / "act.csv"
+            act.write_text("hz,response\n100,1\n300,1\n200,1\n")
+            return ["tactile", rec, "--actuator", act, *good_pattern], "act.csv"
+        if case == "unknown_condition":
+            return ["tactile", rec, "--condition", "Z", *good_pattern], "condition"
+    return ["tactile", rec, *good_pattern], rec.name
+
+
+CASES = ["missing", "empty", "truncated", "not_audio", "nan", "short", "silent", "constant",
+         "low_rate", "bad_actuator_csv", "non_monotonic_actuator", "unknown_condition"]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_bad_input_one_line_exit_2_nothing_written(tmp_path, case):
+    args, names = write_case(tmp_path, case)
+    result = run_cli(*args)
+    assert_clean_failure(result, names)
+    assert not (tmp_path / "out.wav").exists() and not (tmp_path / "out.json").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]
+
+
+def test_analyze_bad_input_too(tmp_path):
+    args, names = write_case(tmp_path, "silent")
+    result = run_cli("analyze", args[1], "--json", tmp_path / "a.json")
+    assert_clean_failure(result, names)
+    assert not (tmp_path / "a.json").exists()
+
+
+def test_condition_and_explicit_counts_conflict(tmp_path):
+    result = run_cli("tactile", EXAMPLE, "--condition", "A", "--top", "7", "-o", tmp_path / "x.wav")
+    assert_clean_failure(result, "--top")

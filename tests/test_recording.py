@@ -1,0 +1,150 @@
+"""Loading recordings, DFT321, resampling and the high-pass filter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from realpen.errors import RealPenError
+from realpen.recording import Recording, combine_axes, dft321, highpass, load_recording, resample
+from signals import sines
+
+RATE = 1344
+
+
+@pytest.mark.parametrize("subtype", ["PCM_16", "PCM_24", "PCM_32", "FLOAT", "DOUBLE"])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_wav_any_subtype_and_channel_count(tmp_path, subtype, channels):
+    x = 0.5 * np.column_stack([sines([100 + 50 * c], [1.0], RATE, 1.0) for c in range(channels)])
+    path = tmp_path / "rec.wav"
+    sf.write(path, x, RATE, subtype=subtype)
+    rec = load_recording(path)
+    assert rec.rate == RATE and rec.samples.shape == (RATE, channels)
+    assert rec.axes == ("x", "y", "z")[:channels]
+    assert np.max(np.abs(rec.samples - x)) < 1e-4
+    assert rec.sha256 and len(rec.sha256) == 64 and rec.source == str(path)
+
+
+def test_csv_with_time_column_and_sniffed_delimiter(tmp_path):
+    t = np.arange(500) / RATE
+    x = sines([120], [1.0], RATE, 500 / RATE)
+    for delimiter in [",", ";", "\t"]:
+        path = tmp_path / "rec.csv"
+        lines = [delimiter.join(["time", "ax", "ay"])]
+        lines += [delimiter.join(f"{v:.9f}" for v in row) for row in zip(t, x, -x)]
+        path.write_text("\n".join(lines) + "\n")
+        rec = load_recording(path)
+        assert rec.rate == pytest.approx(RATE, rel=1e-6)
+        assert rec.axes == ("ax", "ay")
+        assert np.allclose(rec.samples[:, 1], -x, atol=1e-8)
+
+
+def test_csv_without_time_column_needs_rate(tmp_path):
+    path = tmp_path / "rec.csv"
+    path.write_text("x,y,z\n" + "\n".join("1,2,3" for _ in range(10)))
+    with pytest.raises(RealPenError, match="rec.csv.*--rate"):
+        load_recording(path)
+    assert load_recording(path, rate=1000).rate == 1000
+
+
+def test_npz_keeps_axes_units_and_rate(tmp_path):
+    path = tmp_path / "rec.npz"
+    np.savez(path, samples=np.ones((100, 2)), rate=500.0, axes=np.array(["a", "b"]),
+             units=np.array("g"))
+    rec = load_recording(path)
+    assert (rec.rate, rec.axes, rec.units) == (500.0, ("a", "b"), "g")
+
+
+@pytest.mark.parametrize("case, message", [
+    ("missing", "no such file"),
+    ("empty", "file is empty"),
+    ("not_audio", "not a readable audio file"),
+    ("truncated", "truncated"),
+    ("nan_csv", "NaN"),
+    ("backwards_time", "not strictly increasing"),
+    ("bad_npz", "not a readable NPZ"),
+])
+def test_bad_files_give_one_line_naming_the_file(tmp_path, case, message):
+    path = tmp_path / {"nan_csv": "bad.csv", "backwards_time": "bad.csv",
+                       "bad_npz": "bad.npz"}.get(case, "bad.wav")
+    if case == "empty":
+        path.write_bytes(b"")
+    elif case == "not_audio":
+        path.write_text("this is not audio at all\n" * 20)
+    elif case == "truncated":
+        sf.write(path, np.zeros(10000), RATE, subtype="PCM_16")
+        path.write_bytes(path.read_bytes()[:5000])
+    elif case == "nan_csv":
+        path.write_text("t,x\n0,1\n0.001,nan\n0.002,1\n")
+    elif case == "backwards_time":
+        path.write_text("t,x\n0,1\n0.002,1\n0.001,1\n")
+    elif case == "bad_npz":
+        path.write_bytes(b"PK\x03\x04garbage")
+    with pytest.raises(RealPenError) as info:
+        load_recording(path)
+    assert str(path) in str(info.value) and message in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_inf_in_wav_is_rejected(tmp_path):
+    path = tmp_path / "inf.wav"
+    x = np.zeros(100)
+    x[50] = np.inf
+    sf.write(path, x, RATE, subtype="DOUBLE")
+    with pytest.raises(RealPenError, match="NaN or infinite"):
+        load_recording(path)
+
+
+def test_dft321_keeps_summed_spectral_energy():
+    rng = np.random.default_rng(1)
+    axes = rng.standard_normal((4001, 3)) * [1.0, 0.4, 2.0]
+    combined = dft321(axes)
+    energy_axes = np.sum(np.abs(np.fft.rfft(axes, axis=0)) ** 2)
+    energy_combined = np.sum(np.abs(np.fft.rfft(combined)) ** 2)
+    assert energy_combined == pytest.approx(energy_axes, rel=1e-9)
+    # Time-domain energy too (Parseval), since all axes share the same bins.
+    assert np.sum(combined ** 2) == pytest.approx(np.sum(axes ** 2), rel=1e-9)
+
+
+def test_dft321_of_one_axis_is_that_axis_up_to_sign():
+    x = sines([80, 200], [1, 0.5], RATE, 1.0)
+    combined = dft321(np.column_stack([x, np.zeros_like(x), np.zeros_like(x)]))
+    assert np.allclose(combined, x, atol=1e-9)
+
+
+def test_combine_axes_choices():
+    x = sines([80], [1], RATE, 1.0)
+    rec = Recording(np.column_stack([x, 2 * x, 3 * x]), RATE, ("x", "y", "z"))
+    assert np.allclose(combine_axes(rec, "y").mono, 2 * x)
+    assert combine_axes(rec).axes == ("dft321",)
+    magnitude = combine_axes(rec, "magnitude").mono
+    assert abs(magnitude.mean()) < 1e-9
+    with pytest.raises(RealPenError, match="no axis 'w'"):
+        combine_axes(rec, "w")
+
+
+def test_highpass_removes_low_keeps_high_zero_phase():
+    x_low = sines([5], [1], RATE, 4.0, phases=[0])
+    x_high = sines([150], [1], RATE, 4.0, phases=[0])
+    rec = Recording(x_low + x_high, RATE, ("x",))
+    out = highpass(rec, 30).mono
+    middle = slice(RATE, 3 * RATE)
+    assert np.max(np.abs(out[middle] - x_high[middle])) < 0.01  # zero phase: no delay
+    assert out.std() < 0.75
+
+
+def test_highpass_rate_too_low_for_band():
+    rec = Recording(np.zeros(100), 50.0, ("x",), source="slow.csv")
+    with pytest.raises(RealPenError, match="slow.csv.*too low"):
+        highpass(rec, 30)
+
+
+def test_resample_polyphase_keeps_a_tone():
+    x = sines([100], [1], 1000, 2.0, phases=[0])
+    out = resample(Recording(x, 1000, ("x",)), RATE)
+    assert out.rate == pytest.approx(RATE)
+    assert len(out.mono) == pytest.approx(2 * RATE, abs=2)
+    spectrum = np.abs(np.fft.rfft(out.mono * np.hanning(len(out.mono))))
+    peak = np.fft.rfftfreq(len(out.mono), 1 / out.rate)[spectrum.argmax()]
+    assert peak == pytest.approx(100, abs=1)
