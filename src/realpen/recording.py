@@ -82,7 +82,8 @@ def _check_finite(samples: np.ndarray, source: str) -> None:
         raise fail(source, f"contains NaN or infinite values (first at frame {first})")
 
 
-def _open_checked(path: Path) -> None:
+def check_readable_file(path: Path) -> None:
+    """Raise a one-line :class:`RealPenError` unless ``path`` is an existing, non-empty file."""
     if not path.exists():
         raise fail(path, "no such file")
     if path.is_dir():
@@ -110,7 +111,7 @@ def load_recording(path: str | os.PathLike, rate: float | None = None,
             with no time column and no ``rate``.
     """
     path = Path(path)
-    _open_checked(path)
+    check_readable_file(path)
     suffix = path.suffix.lower()
     if suffix == ".csv":
         recording = _load_csv(path, rate)

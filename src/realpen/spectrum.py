@@ -124,6 +124,8 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
         spectrum = np.fft.rfft(block * window, n=nfft, axis=1)
         power = (spectrum.real ** 2 + spectrum.imag ** 2) * scale
         peaks_f, peaks_p = _top_peaks(power, in_band, half_width, top, bin_hz)
+        # Sub-bin interpolation may step a hair past a band edge; the peak is still in band.
+        peaks_f = np.clip(peaks_f, fmin, fmax)
         out_freqs[first:first + len(block)] = peaks_f
         out_powers[first:first + len(block)] = peaks_p
         band_power = np.add.reduceat(power[:, in_band.argmax():], band_edges - in_band.argmax(),

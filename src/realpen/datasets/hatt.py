@@ -30,7 +30,7 @@ from scipy import signal
 
 from ..errors import fail
 from ..fileio import sha256_of
-from ..recording import Recording, _open_checked
+from ..recording import Recording, check_readable_file
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,8 +59,7 @@ class ArmaModel:
     def output_variance(self) -> float:
         """Theoretical variance of the synthesised acceleration, (m/s²)²: ``var · Σ h[n]²``,
         with ``h`` the impulse response of ``gain · MA / AR``."""
-        impulse = np.zeros(_decay_length(self.ar) + len(self.ma))
-        impulse[0] = 1.0
+        impulse = signal.unit_impulse(_decay_length(self.ar) + len(self.ma))
         h = signal.lfilter(self.gain * self.ma, self.ar, impulse)
         return self.variance * float(np.sum(h ** 2))
 
@@ -90,10 +89,9 @@ def lsf_to_poly(lsf: np.ndarray) -> np.ndarray:
 
 def _decay_length(ar: np.ndarray, tolerance: float = 1e-12) -> int:
     """Samples until the slowest pole of ``1 / AR`` decays below ``tolerance`` (16 .. 10⁶)."""
-    radius = float(np.max(np.abs(np.roots(ar)))) if len(ar) > 1 else 0.0
-    if radius <= 0.0:
-        return 16
-    return int(min(max(16, math.ceil(math.log(tolerance) / math.log(radius))), 1_000_000))
+    radius = float(np.max(np.abs(np.roots(ar)), initial=0.0))
+    steps = math.log(tolerance) / math.log(radius) if radius > 0 else 0.0
+    return int(min(max(16, math.ceil(steps)), 1_000_000))
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,7 +192,7 @@ def load_hatt(path: str | os.PathLike) -> HattModelSet:
             outside 1..numMod, degenerate triangles, disordered LSFs.
     """
     path = Path(path)
-    _open_checked(path)
+    check_readable_file(path)
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as error:
@@ -259,8 +257,7 @@ def synthesize(model_set: HattModelSet, speed_mm_s: float | np.ndarray, force_n:
     """
     frames = int(round(duration_s * model_set.rate)) if math.isfinite(duration_s) else 0
     if frames < 1:
-        raise fail("duration_s", f"must give at least one sample at {model_set.rate:g} Hz, "
-                                 f"got {duration_s}")
+        raise fail("duration_s", f"must give at least one sample at {model_set.rate:g} Hz")
     tracks = []
     for name, value in (("speed_mm_s", speed_mm_s), ("force_n", force_n)):
         value = np.asarray(value, dtype=np.float64)
