@@ -97,6 +97,21 @@ class TactileParams:
         return cls(top=top, subpatterns=subpatterns, unit_ms=unit_ms, condition=key, **overrides)
 
 
+    @classmethod
+    def resolve(cls, condition: str | None, top: int | None = None, subpatterns: int | None = None,
+                unit_ms: float | None = None, **options) -> "TactileParams":
+        """A condition preset or explicit counts (unset counts keep the defaults); not both."""
+        explicit = {key: value for key, value in
+                    (("top", top), ("subpatterns", subpatterns), ("unit_ms", unit_ms))
+                    if value is not None}
+        if condition is None:
+            return cls(**explicit, **options)
+        if explicit:
+            names = ", ".join("--" + key.replace("_", "-") for key in explicit)
+            raise RealPenError(f"--condition sets the counts; do not combine it with {names}")
+        return cls.for_condition(condition, **options)
+
+
 @dataclass(frozen=True)
 class Component:
     """One sinusoid of a sub-pattern.

@@ -10,7 +10,6 @@ import typer
 from rich.table import Table
 
 from ..actuator import parse_actuator
-from ..errors import RealPenError
 from ..fileio import write_json, write_wav
 from ..recording import load_recording, prepare
 from ..spectrum import analyze as analyze_signal
@@ -91,7 +90,7 @@ def tactile(
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write components and parameters."),
 ) -> None:
     """Build the looping tactile pattern of a recording, equalised for an actuator."""
-    params = tactile_params(condition, top, subpatterns, unit_ms, rate=rate, boundary=boundary,
+    params = TactileParams.resolve(condition, top, subpatterns, unit_ms, rate=rate, boundary=boundary,
                             crossfade_ms=crossfade_ms, amplitude=amplitude, seed=seed,
                             cap_db=cap_db, selection=select, highpass_hz=highpass_hz, axis=axis,
                             analysis_rate=analysis_rate)
@@ -111,16 +110,3 @@ def tactile(
     if json_out is not None:
         console.print(f"wrote {json_out}")
 
-
-def tactile_params(condition: str | None, top: int | None, subpatterns: int | None,
-                   unit_ms: float | None, **options) -> TactileParams:
-    """Merge a condition preset with explicit counts; both at once is an error."""
-    explicit = {key: value for key, value in
-                (("top", top), ("subpatterns", subpatterns), ("unit_ms", unit_ms))
-                if value is not None}
-    if condition is not None:
-        if explicit:
-            names = ", ".join("--" + key.replace("_", "-") for key in explicit)
-            raise RealPenError(f"--condition sets the counts; do not combine it with {names}")
-        return TactileParams.for_condition(condition, **options)
-    return TactileParams(**explicit, **options)
