@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import io
 import json
 import os
 import tempfile
@@ -15,6 +16,7 @@ from typing import Iterator
 
 import numpy as np
 import soundfile as sf
+from scipy.io import wavfile
 
 
 @contextlib.contextmanager
@@ -44,15 +46,30 @@ def write_json(target: str | os.PathLike, data: object) -> None:
         tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
 
 
+def wav_bytes(samples: np.ndarray, rate: int) -> bytes:
+    """A 32-bit float WAV of ``samples`` (frames, or frames × channels) at ``rate`` Hz, as bytes.
+
+    Written by scipy rather than libsndfile, whose float WAVs carry a time-stamped PEAK chunk:
+    the same samples must always give the same bytes (bundles are checked by SHA-256).
+    """
+    buffer = io.BytesIO()
+    wavfile.write(buffer, int(rate), np.asarray(samples, dtype=np.float32))
+    return buffer.getvalue()
+
+
 def write_wav(target: str | os.PathLike, samples: np.ndarray, rate: int,
               subtype: str = "FLOAT") -> None:
     """Write ``samples`` (frames, or frames × channels; full scale ±1) at ``rate`` Hz atomically.
 
-    ``subtype`` is a soundfile subtype; the default 32-bit float keeps the samples exactly.
+    ``subtype`` is a soundfile subtype; the default 32-bit float keeps the samples exactly and
+    gives identical bytes for identical samples.
     """
     with atomic_path(target) as tmp:
-        sf.write(tmp, np.asarray(samples, dtype=np.float32), int(rate), subtype=subtype,
-                 format="WAV")
+        if subtype == "FLOAT":
+            tmp.write_bytes(wav_bytes(samples, rate))
+        else:
+            sf.write(tmp, np.asarray(samples, dtype=np.float32), int(rate), subtype=subtype,
+                     format="WAV")
 
 
 def sha256_of(path: str | os.PathLike) -> str:
