@@ -1,0 +1,449 @@
+"""Loop-unit search, crossfade, seam report, loading and granular synthesis."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+from scipy import signal
+
+from conftest import LMT_DIR
+from realpen.coupling import Coupling
+from realpen.errors import RealPenError
+from realpen.granular import granular, granular_loop, steady_part
+from realpen.sound import (crossfade_gains, find_loop_unit, level_db, load_sound, make_loop,
+                           scan_windows, seam_report)
+from realpen.stroke import Trajectory, control_signals, load_trajectory, render_stroke
+
+RATE = 48000
+UNIT = 14400   # 300 ms
+FADE = 480     # 10 ms
+EDGE = 960     # 20 ms
+LMT = LMT_DIR  # ../shared/data/lmt108_sound: read in place, never copied into the repo
+
+
+def noise(seconds: float, seed: int, rms: float = 0.1) -> np.ndarray:
+    return np.random.default_rng(seed).standard_normal(int(seconds * RATE)) * rms
+
+
+def lowpassed(seconds: float, seed: int, cutoff: float = 2000.0, rms: float = 0.1) -> np.ndarray:
+    b, a = signal.butter(4, cutoff, fs=RATE)
+    x = signal.lfilter(b, a, noise(seconds, seed))
+    return x * rms / x.std()
+
+
+def spectral_centroid(x: np.ndarray) -> float:
+    freqs, power = signal.welch(x, RATE, nperseg=2048)
+    return float(np.sum(freqs * power) / np.sum(power))
+
+
+# --- synthetic signals with a known discontinuity ---------------------------------------------
+
+AT = int(1.4 * RATE)  # where the discontinuity is
+
+
+def with_discontinuity(kind: str, seed: int) -> np.ndarray:
+    x = noise(3.0, seed)
+    if kind == "level step":
+        x[AT:] *= 10 ** (-12 / 20)
+    elif kind == "spectrum change":
+        x[AT:] = lowpassed(3.0, seed + 100)[AT:]
+    elif kind == "click":
+        x[AT:AT + 48] *= 10
+    elif kind == "dropout":
+        x[AT:AT + EDGE] = 0.0
+    elif kind == "looped noise, gain step":
+        x = np.tile(noise(0.3, seed + 7), 10)
+        x[AT:] *= 10 ** (6 / 20)
+    return x
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("kind", ["level step", "spectrum change", "click", "dropout",
+                                  "looped noise, gain step"])
+def test_discontinuity_is_rejected_for_a_clean_window(kind, seed):
+    x = with_discontinuity(kind, seed)
+    unit = find_loop_unit(x, RATE)
+    start = int(round(unit.start_s * RATE))
+    read = range(start, start + UNIT + FADE)  # everything the loop is made from
+    assert AT not in read and AT + EDGE not in read, f"unit at {unit.start_s} s holds the {kind}"
+    scan = scan_windows(x, RATE)
+    straddling = (scan.starts <= AT) & (scan.starts + UNIT + FADE > AT)
+    assert scan.cost[straddling].min() > unit.scores["cost"]
+    assert unit.seam.level_jump_db < 0.5
+
+
+def test_level_step_windows_score_a_large_level_jump():
+    x = with_discontinuity("level step", 0)
+    scan = scan_windows(x, RATE)
+    # head before the step, tail and continuation after it. The head's first 10 ms blend the
+    # two (equal power: the mean of both powers), its last 10 ms are the head's own level.
+    across = (scan.starts + EDGE < AT) & (scan.starts + UNIT - EDGE > AT)
+    clean = scan.starts + UNIT + FADE < AT
+    quiet = 10 ** (-12 / 10)
+    expected = 12 + 10 * np.log10((1 + (1 + quiet) / 2) / 2)
+    assert np.median(scan.level_jump_db[across]) == pytest.approx(expected, abs=0.5)
+    assert np.median(scan.level_jump_db[clean]) < 0.5
+
+
+@pytest.mark.parametrize("frequency", [440.0, 443.0, 1000.0, 3100.3])
+def test_stationary_tone_loops_with_small_level_jump(frequency):
+    x = 0.3 * np.sin(2 * np.pi * frequency * np.arange(2 * RATE) / RATE)
+    unit = find_loop_unit(x, RATE)
+    assert unit.seam.level_jump_db < 0.5
+    assert len(unit.samples) == UNIT
+    # the whole loop keeps the tone's level: no dip or bump anywhere, the crossfade included
+    levels = [level_db(unit.samples[i:i + EDGE]) for i in range(0, UNIT - EDGE, 240)]
+    assert max(levels) - min(levels) < 0.5
+
+
+def test_plain_sin_cos_crossfade_bumps_a_tone_that_compensation_fixes():
+    x = 0.3 * np.sin(2 * np.pi * 440.0 * np.arange(2 * RATE) / RATE)  # 132 cycles per unit
+    plain = find_loop_unit(x, RATE, compensate=False)
+    fixed = find_loop_unit(x, RATE)
+    assert plain.seam.level_jump_db > 1.0
+    assert fixed.seam.level_jump_db < 0.1
+    assert fixed.correlation == pytest.approx(1.0, abs=1e-6)
+
+
+def test_crossfade_gains_keep_power_for_any_correlation():
+    fade_in, fade_out = crossfade_gains(480, 0.0)
+    np.testing.assert_allclose(fade_in ** 2 + fade_out ** 2, 1.0, atol=1e-12)
+    fade_in, fade_out = crossfade_gains(480, 1.0)
+    np.testing.assert_allclose(fade_in + fade_out, 1.0, atol=1e-12)
+    for rho in (-0.3, 0.4, 0.8):
+        fade_in, fade_out = crossfade_gains(480, rho)
+        power = fade_in ** 2 + fade_out ** 2 + 2 * rho * fade_in * fade_out
+        np.testing.assert_allclose(power, 1.0, atol=1e-12)
+    assert np.all(np.diff(fade_in) > 0) and np.all(np.diff(fade_out) < 0)
+
+
+def test_unit_is_cut_where_start_s_says_and_wraps_into_the_continuation():
+    x = noise(2.0, 3)
+    unit = find_loop_unit(x, RATE)
+    start = int(round(unit.start_s * RATE))
+    assert start % 240 == 0  # on the 5 ms scan grid
+    np.testing.assert_array_equal(unit.samples[FADE:], x[start + FADE:start + UNIT])
+    # right after the wrap the loop plays what followed the tail in the recording
+    assert abs(unit.samples[0] - x[start + UNIT]) < 0.01 * np.abs(x).max()
+    again, rho = make_loop(x, start, UNIT, FADE)
+    np.testing.assert_array_equal(again, unit.samples)
+    assert rho == pytest.approx(unit.correlation)
+
+
+def test_scan_scores_what_the_seam_report_measures():
+    x = lowpassed(3.0, 5) * np.repeat(np.random.default_rng(5).uniform(0.5, 1.5, 30), RATE // 10)
+    unit = find_loop_unit(x, RATE)
+    assert unit.scores["level_jump_db"] == pytest.approx(unit.seam.level_jump_db, abs=1e-9)
+    assert set(unit.scores) == {"level_jump_db", "spectral_db", "stationarity_db",
+                                "quietness_db", "cost"}
+    weighted = sum(unit.weights[k] * unit.scores[k] for k in unit.weights)
+    assert unit.scores["cost"] == pytest.approx(weighted)
+
+
+def test_seam_report_flags_a_bad_splice():
+    x = noise(0.3, 9)
+    clean = seam_report(np.tile(x, 1), RATE)  # a cut of stationary noise: any wrap is ordinary
+    spliced = x.copy()
+    spliced[-EDGE:] *= 10 ** (-15 / 20)  # the last 20 ms drop by 15 dB: a jump at the wrap
+    bad = seam_report(spliced, RATE)
+    assert bad.level_jump_db == pytest.approx(15.0, abs=0.5)
+    assert bad.flux_wrap_db > bad.flux_inside_p95_db
+    assert clean.level_jump_db < 1.0
+    assert bad.pairs == clean.pairs == (UNIT - 2 * EDGE) // 240 + 1
+
+
+def test_near_silence_is_not_chosen():
+    x = noise(3.0, 4, rms=0.1)
+    x[: 2 * RATE] *= 10 ** (-50 / 20)  # two quiet seconds, then one loud one
+    scan = scan_windows(x, RATE)
+    unit = find_loop_unit(x, RATE)
+    assert unit.start_s >= 2.0
+    assert scan.rejected.sum() > 0
+    assert unit.rejected == int(scan.rejected.sum())
+
+
+def test_silence_and_short_recordings_are_refused():
+    with pytest.raises(RealPenError, match="take.wav: recording is silent"):
+        find_loop_unit(np.zeros(RATE), RATE, source="take.wav")
+    with pytest.raises(RealPenError, match="short.wav: recording lasts 200 ms, shorter than the "
+                                           "300 ms unit"):
+        find_loop_unit(noise(0.2, 0), RATE, source="short.wav")
+    with pytest.raises(RealPenError, match="--crossfade-ms"):
+        find_loop_unit(noise(1.0, 0), RATE, crossfade_ms=300)
+    with pytest.raises(RealPenError, match="--unit-ms"):
+        find_loop_unit(noise(1.0, 0), RATE, unit_ms=float("nan"))
+
+
+def test_scan_is_fast():
+    x = noise(4.8, 11)
+    began = time.perf_counter()
+    scan = scan_windows(x, RATE, hop_ms=5.0)
+    elapsed = time.perf_counter() - began
+    assert len(scan.starts) == (len(x) - UNIT - FADE) // 240 + 1
+    assert elapsed < 1.0
+
+
+def test_scan_reports_progress_to_the_end():
+    x = noise(20.0, 12)
+    calls = []
+    find_loop_unit(x, RATE, progress=lambda done, total: calls.append((done, total)))
+    windows = (len(x) - UNIT - FADE) // 240 + 1
+    assert len(calls) >= 2 and calls[-1] == (windows, windows)
+    assert [done for done, _ in calls] == sorted(done for done, _ in calls)
+
+
+# --- loading ----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("suffix,subtype", [(".wav", "PCM_16"), (".flac", "PCM_24"),
+                                            (".ogg", "VORBIS")])
+def test_load_sound_mixes_down_and_resamples(tmp_path, suffix, subtype):
+    left = lowpassed(1.0, 1) * 0.5
+    path = tmp_path / f"take{suffix}"
+    sf.write(path, np.column_stack([left, left]), 44100, subtype=subtype)
+    sound = load_sound(path)
+    assert sound.rate == 48000
+    assert sound.axes == ("mono",)
+    assert abs(len(sound.mono) - len(left) * 48000 / 44100) <= 2
+    assert level_db(sound.mono) == pytest.approx(level_db(left), abs=0.5)
+    assert any(step.startswith("mixdown:2ch") for step in sound.history)
+    assert load_sound(path, rate=None).rate == 44100
+
+
+def test_load_sound_mixdown_is_the_mean_of_the_channels(tmp_path):
+    left, right = noise(0.5, 1), noise(0.5, 2)
+    path = tmp_path / "stereo.wav"
+    sf.write(path, np.column_stack([left, right]), 48000, subtype="FLOAT")
+    np.testing.assert_allclose(load_sound(path).mono, (left + right) / 2, atol=1e-7)
+
+
+def test_load_sound_refuses_bad_files(tmp_path):
+    empty = tmp_path / "empty.wav"
+    empty.write_bytes(b"")
+    text = tmp_path / "notes.wav"
+    text.write_text("not audio\n")
+    silent = tmp_path / "silent.wav"
+    sf.write(silent, np.zeros(RATE), RATE)
+    nan = tmp_path / "nan.wav"
+    x = noise(0.5, 0)
+    x[100] = np.nan
+    sf.write(nan, x, RATE, subtype="FLOAT")
+    table = tmp_path / "stroke.csv"
+    table.write_text("t,x,y,pressure\n0,0,0,1\n")
+    whole = tmp_path / "whole.wav"
+    sf.write(whole, noise(1.0, 0), RATE)
+    cut = tmp_path / "cut.wav"
+    cut.write_bytes(whole.read_bytes()[:30000])
+    for path in (tmp_path / "missing.wav", empty, text, silent, nan, table, cut):
+        with pytest.raises(RealPenError) as caught:
+            load_sound(path)
+        message = str(caught.value)
+        assert message.startswith(str(path)) and "\n" not in message
+
+
+# --- granular ---------------------------------------------------------------------------------
+
+def test_steady_part_leaves_out_bursts_and_quiet_stretches():
+    x = noise(3.0, 2)
+    burst = slice(int(1.0 * RATE), int(1.3 * RATE))
+    x[burst] *= 10          # +20 dB
+    x[int(2.0 * RATE):int(2.4 * RATE)] *= 0.01  # −40 dB
+    span = 2402
+    part = steady_part(x, RATE, span * 1000 / RATE)
+    ends = part.starts + part.span
+    for low, high in ((1.0, 1.3), (2.0, 2.4)):
+        lo, hi = int(low * RATE), int(high * RATE)
+        assert not np.any((part.starts < hi) & (ends > lo)), f"grains read {low}–{high} s"
+    assert part.rms == pytest.approx(0.1, rel=0.1)
+    assert len(part.starts) > 100
+
+
+def test_granular_texture_is_steady_and_seamless():
+    x = lowpassed(3.0, 6)
+    texture = granular_loop(x, RATE, length_ms=2000, seed=1)
+    assert len(texture.samples) == 2 * RATE
+    assert level_db(texture.samples) == pytest.approx(-20.0, abs=1.0)
+    levels = [level_db(texture.samples[i:i + 4800]) for i in range(0, 2 * RATE, 4800)]
+    assert np.std(levels) < 1.0
+    assert texture.seam.pairs > 300
+
+
+def test_granular_texture_wraps_without_a_splice():
+    # Low-passed noise barely moves from one sample to the next; a splice of two unrelated
+    # stretches jumps. Over many seeds the step across the wrap of a circular texture must be
+    # as small as any other step, and the step of a texture that is merely cut is not.
+    x = lowpassed(3.0, 15, cutoff=1000)
+    part = steady_part(x, RATE, 2402 * 1000 / RATE)
+
+    def wrap_step_ratio(circular: bool) -> float:
+        ratios = []
+        for seed in range(30):
+            y = granular(x, RATE, RATE, part, seed=seed, circular=circular)
+            typical = np.mean(np.diff(y) ** 2)
+            ratios.append((y[0] - y[-1]) ** 2 / typical)
+        return float(np.mean(ratios))
+
+    assert wrap_step_ratio(circular=True) < 2.0
+    assert wrap_step_ratio(circular=False) > 20.0
+
+
+def test_granular_does_not_repeat_like_a_loop():
+    x = lowpassed(3.0, 7)
+    texture = granular_loop(x, RATE, length_ms=1200, seed=2).samples
+    loop = np.tile(find_loop_unit(x, RATE).samples, 4)
+    period = UNIT
+
+    def repetition(y):
+        a, b = y[:len(y) - period], y[period:]
+        return float(np.dot(a, b) / np.sqrt(np.dot(a, a) * np.dot(b, b)))
+
+    assert repetition(loop) > 0.99
+    assert abs(repetition(texture)) < 0.2
+
+
+def test_playback_rate_makes_grains_brighter():
+    x = lowpassed(3.0, 8, cutoff=3000)
+    part = steady_part(x, RATE, 2 * 2400 * 1000 / RATE)
+    slow = granular(x, RATE, RATE, part, playback_rate=np.full(RATE, 0.8))
+    fast = granular(x, RATE, RATE, part, playback_rate=np.full(RATE, 1.25))
+    ratio = spectral_centroid(fast) / spectral_centroid(slow)
+    assert ratio == pytest.approx(1.25 / 0.8, rel=0.1)
+
+
+# --- real recordings (LMT-108) ----------------------------------------------------------------
+
+def lmt_files() -> list[Path]:
+    return sorted(LMT.glob("*.wav")) if LMT.is_dir() else []
+
+
+@pytest.mark.skipif(not lmt_files(), reason=f"LMT-108 sound folder absent ({LMT}); it is read "
+                                            "from ../shared/data, never copied into the repo")
+@pytest.mark.parametrize("path", lmt_files(), ids=lambda p: p.stem)
+def test_lmt108_unit_loops_seamlessly(path):
+    sound = load_sound(path)
+    began = time.perf_counter()
+    unit = find_loop_unit(sound.mono, sound.rate, source=path)
+    assert time.perf_counter() - began < 2.0
+    assert len(unit.samples) == UNIT
+    assert 0 <= unit.start_s <= len(sound.mono) / RATE - 0.31
+    assert unit.seam.level_jump_db < 1.0
+    assert unit.seam.flux_wrap_db <= unit.seam.flux_inside_p95_db
+
+
+@pytest.mark.skipif(not (LMT / "G8RoughPaper_Sound_Movement_train1.wav").exists(),
+                    reason=f"LMT-108 Rough Paper recording absent from {LMT}")
+def test_lmt108_rough_paper_granular_texture():
+    sound = load_sound(LMT / "G8RoughPaper_Sound_Movement_train1.wav")
+    texture = granular_loop(sound.mono, sound.rate, seed=0)
+    assert len(texture.samples) == 3 * RATE
+    assert sum(b - a for a, b in texture.part.stretches) / RATE > 1.0
+    levels = [level_db(texture.samples[i:i + 4800]) for i in range(0, 3 * RATE, 4800)]
+    assert np.std(levels) < 1.5
+    assert level_db(texture.samples) == pytest.approx(-20.0, abs=1.5)
+
+
+# --- rendering a stroke -----------------------------------------------------------------------
+
+# (start s, end s, speed mm/s, pressure): slow and light, fast and hard, lifted, ordinary
+SEGMENTS = [(0.0, 0.5, 20.0, 0.3), (0.5, 1.0, 120.0, 0.8), (1.0, 1.3, 0.0, 0.0),
+            (1.3, 1.8, 50.0, 0.5)]
+
+
+def stroke(event_rate: float = 200.0) -> Trajectory:
+    t = np.arange(0, 1.8, 1 / event_rate)
+    speed = np.select([(t >= a) & (t < b) for a, b, _, _ in SEGMENTS], [s[2] for s in SEGMENTS])
+    pressure = np.select([(t >= a) & (t < b) for a, b, _, _ in SEGMENTS],
+                         [s[3] for s in SEGMENTS])
+    x = np.cumsum(speed / event_rate) * np.cos(0.3)
+    y = np.cumsum(speed / event_rate) * np.sin(0.3)
+    return Trajectory.checked(t, x, y, pressure)
+
+
+def segment(samples: np.ndarray, low: float, high: float) -> np.ndarray:
+    return samples[int(low * RATE):int(high * RATE)]
+
+
+@pytest.mark.parametrize("mode", ["loop", "granular"])
+def test_rendered_stroke_is_louder_faster_and_harder_and_silent_when_lifted(mode):
+    recording = lowpassed(3.0, 12, cutoff=4000)
+    rendered = render_stroke(recording, RATE, stroke(), Coupling(), mode)
+    out = rendered.samples
+    slow, fast, lifted, ordinary = (segment(out, a + 0.05, b) for a, b, _, _ in SEGMENTS)
+    assert level_db(fast) > level_db(ordinary) + 3 > level_db(slow) + 6
+    # gain 1 plays at −20 dBFS, so each stretch sits at −20 dB + 20·log10(Eq. 1)
+    coupling = Coupling()
+    for part, (_, _, speed, pressure) in zip((slow, fast, ordinary), SEGMENTS[:2] + SEGMENTS[3:]):
+        expected = -20 + 20 * np.log10(float(coupling.gain_raw(pressure, speed)))
+        assert level_db(part) == pytest.approx(expected, abs=1.5)
+    assert np.max(np.abs(lifted)) < 1e-3 * np.max(np.abs(fast))
+    assert np.all(rendered.target_gain[int(1.0 * RATE) + 1:int(1.3 * RATE)] == 0)
+
+
+@pytest.mark.parametrize("mode", ["loop", "granular"])
+def test_faster_strokes_sound_brighter_through_the_playback_rate(mode):
+    recording = lowpassed(3.0, 13, cutoff=3000)
+    brighter = render_stroke(recording, RATE, stroke(), Coupling(), mode).samples
+    constant = render_stroke(recording, RATE, stroke(), Coupling(rate_exponent=0), mode).samples
+    ratio = (spectral_centroid(segment(brighter, 0.6, 1.0))
+             / spectral_centroid(segment(brighter, 0.1, 0.5)))
+    assert ratio == pytest.approx((120 / 50) ** 0.25 / 0.8, rel=0.1)  # 0.8 = rate_min at 20 mm/s
+    flat = (spectral_centroid(segment(constant, 0.6, 1.0))
+            / spectral_centroid(segment(constant, 0.1, 0.5)))
+    assert flat == pytest.approx(1.0, abs=0.05)
+
+
+def test_control_signals_follow_eq1_per_event_then_smooth():
+    trajectory = stroke()
+    coupling = Coupling()
+    target, gain, playback = control_signals(trajectory, coupling, RATE)
+    events = np.round((trajectory.t - trajectory.t[0]) * RATE).astype(int)
+    np.testing.assert_allclose(target[events],
+                               coupling.gain_raw(trajectory.pressure, trajectory.speed()))
+    np.testing.assert_allclose(gain, coupling.smooth(target, RATE))
+    tail = int(np.ceil(5 * coupling.smoothing_ms / 1000 * RATE))
+    assert len(gain) == int(np.floor(trajectory.duration_s * RATE)) + 1 + tail
+    assert gain[-1] < 0.01 * gain.max()
+    assert playback.min() >= coupling.rate_min and playback.max() <= coupling.rate_max
+
+
+def test_speed_is_causal_and_zero_at_touch_down():
+    trajectory = Trajectory.checked([0, 0.1, 0.2, 0.3, 0.4], [0, 3, 7, 7, 10], [0, 4, 4, 4, 0],
+                                    [0.5, 0.5, 0.5, 0.0, 0.5])
+    np.testing.assert_allclose(trajectory.speed(), [0, 50, 40, 0, 0])
+
+
+def test_render_uses_a_ready_loop_as_is():
+    loop = find_loop_unit(lowpassed(3.0, 14), RATE).samples
+    rendered = render_stroke(loop, RATE, stroke(), Coupling(rate_exponent=0))
+    assert rendered.unit is None
+    begin = int(0.6 * RATE)
+    steady = rendered.samples[begin:begin + UNIT]
+    gain = float(Coupling().gain_raw(0.8, 120.0))
+    level = 10 ** (-20 / 20) / np.sqrt(np.mean(loop ** 2))
+    expected = np.roll(loop, -begin % UNIT) * level
+    np.testing.assert_allclose(steady, gain * expected, rtol=1e-6, atol=1e-9)
+
+
+def test_load_trajectory_validates(tmp_path):
+    good = tmp_path / "stroke.csv"
+    good.write_text("pressure,t,x,y\n0.5,0,0,0\n0.6,0.01,1,0\n")
+    trajectory = load_trajectory(good)
+    np.testing.assert_array_equal(trajectory.t, [0, 0.01])
+    np.testing.assert_allclose(trajectory.speed(), [0, 100])
+    cases = {"t,x,y\n0,0,0\n0.1,1,1\n": "missing pressure",
+             "t,x,y,pressure\n0,0,0,0.5\n": "at least 2 data row",
+             "t,x,y,pressure\n0,0,0,0.5\n0,1,0,0.5\n": "t must increase strictly",
+             "t,x,y,pressure\n0,0,0,0.5\n0.1,1,0,1.2\n": "pressure 1.2 must be between 0 and 1",
+             "t,x,y,pressure\n0,0,0,0.5\n0.1,nan,0,0.5\n": "NaN or infinite",
+             "t,x,y,pressure\n0,0,0,0.5\n0.1,1,0\n": "3 values for the 4 columns",
+             "t,x,y,pressure\n0,0,0,0.5\n0.1,1,0,hard\n": "'hard' in column 'pressure'",
+             "t,x,y,pressure\n0,0,0,0.5\n1000,1,0,0.5\n": "t must be in seconds"}
+    for content, problem in cases.items():
+        bad = tmp_path / "bad.csv"
+        bad.write_text(content)
+        with pytest.raises(RealPenError, match=problem) as caught:
+            load_trajectory(bad)
+        assert str(caught.value).startswith(str(bad))
