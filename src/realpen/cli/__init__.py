@@ -37,3 +37,4 @@ def main() -> None:
 # Subcommand modules register themselves on `app` when imported.
 from . import tactile_cmds  # noqa: E402,F401
 from . import sound_cmds  # noqa: E402,F401
+from . import profile_cmds  # noqa: E402,F401

@@ -1,0 +1,31 @@
+"""Regenerate the bundled pen profiles (pencil, ballpoint, marker) from the pen model.
+
+The model (``realpen.pens.model``) writes a vibration recording and a friction-sound recording
+per pen; those go through exactly the pipeline of ``realpen profile build``. The model is
+seeded, so running this again gives byte-identical bundles.
+
+Usage: python scripts/make_bundled_pens.py [OUT_DIR]   (default: src/realpen/pens/bundled)
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+from realpen.pens import BUNDLED_PENS, BUNDLE_ACTUATOR, bundled_dir
+from realpen.pens.build import build_modelled_pen
+from realpen.profile import save_profile
+
+
+def main() -> None:
+    out = Path(sys.argv[1]) if len(sys.argv) > 1 else bundled_dir()
+    with tempfile.TemporaryDirectory() as scratch:
+        for name in BUNDLED_PENS:
+            profile = build_modelled_pen(name, Path(scratch), BUNDLE_ACTUATOR)
+            save_profile(profile, out / name)
+            print(f"wrote {out / name}: {profile.summary()}")
+
+
+if __name__ == "__main__":
+    main()

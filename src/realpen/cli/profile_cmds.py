@@ -1,0 +1,111 @@
+"""``realpen profile build | list | show``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from ..actuator import parse_actuator
+from ..coupling import Coupling
+from ..profile import build_profile, list_profiles, load_profile, resolve_profile, save_profile
+from ..recording import load_recording
+from ..sound import load_sound
+from ..tactile import TactileParams
+from . import app
+from .common import PROGRESS_AFTER_S, console, progress_bar
+
+profile_app = typer.Typer(help="Pen profiles: build, list and show.", no_args_is_help=True)
+app.add_typer(profile_app, name="profile")
+
+
+@profile_app.command("build")
+def build(
+    name: str = typer.Option(..., "--name", help="Profile name (letters, digits, - _ .)."),
+    vibration: Path = typer.Option(..., "--vibration", help="Vibration recording (WAV/CSV/NPZ)."),
+    sound: Path = typer.Option(..., "--sound", help="Friction-sound recording (WAV/FLAC/OGG)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Bundle folder, or a .zip file."),
+    actuator: str = typer.Option("lra:f0=175,q=8", "--actuator",
+                                 help="lra:f0=..,q=.. | piezo:f0=..,q=.. | flat | measured.csv"),
+    tool: str = typer.Option("pen", "--tool", help="Tool type (pencil, ballpoint, marker, ...)."),
+    description: str = typer.Option("", "--description", help="A sentence about the pen."),
+    condition: Optional[str] = typer.Option(None, "--condition", help="Study-1 preset A–F."),
+    top: Optional[int] = typer.Option(None, "--top", help="Principal frequencies per sub-pattern."),
+    subpatterns: Optional[int] = typer.Option(None, "--subpatterns", help="Sub-patterns (K)."),
+    unit_ms: Optional[float] = typer.Option(None, "--unit-ms", help="Sub-pattern length in ms."),
+    rate: int = typer.Option(8000, "--rate", help="Tactile output rate in Hz."),
+    boundary: str = typer.Option("crossfade", "--boundary", help="crossfade | hard."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the random phases."),
+    cap_db: float = typer.Option(20.0, "--cap-db", help="Cap of the actuator weighting in dB."),
+    axis: Optional[str] = typer.Option(None, "--axis", help="dft321 | magnitude | x | y | z."),
+    input_rate: Optional[float] = typer.Option(None, "--input-rate",
+                                               help="Rate in Hz of a vibration CSV without time."),
+    analysis_rate: Optional[float] = typer.Option(None, "--analysis-rate",
+                                                  help="Resample the vibration to this rate first."),
+    sound_unit_ms: float = typer.Option(300.0, "--sound-unit-ms", help="Sound loop unit in ms."),
+    sound_crossfade_ms: float = typer.Option(10.0, "--sound-crossfade-ms",
+                                             help="Crossfade at the sound loop's wrap in ms."),
+    coupling: Optional[Path] = typer.Option(None, "--coupling",
+                                            help="Coupling JSON (Eq. 1); default constants if absent."),
+) -> None:
+    """Run the tactile and auditory pipelines and write a profile bundle atomically."""
+    params = TactileParams.resolve(condition, top, subpatterns, unit_ms, rate=rate,
+                                   boundary=boundary, seed=seed, cap_db=cap_db, axis=axis,
+                                   analysis_rate=analysis_rate)
+    response = parse_actuator(actuator)
+    constants = Coupling.load(coupling) if coupling is not None else Coupling()
+    shake = load_recording(vibration, rate=input_rate)
+    noise = load_sound(sound)
+    with progress_bar("building", shake.duration > PROGRESS_AFTER_S) as progress:
+        profile = build_profile(name, tool, shake, noise, response, params, sound_unit_ms,
+                                sound_crossfade_ms, constants, description, progress=progress)
+    save_profile(profile, output)
+    console.print(f"wrote {output}: {profile.summary()}")
+    for note in profile.meta.provenance.notes:
+        console.print(f"note: {note}")
+
+
+@profile_app.command("list")
+def list_command(
+    profiles: list[Path] = typer.Option([], "--profiles", help="Another folder of profiles."),
+) -> None:
+    """List the bundled and the user's profiles, one line each."""
+    table = Table("where", "profile", "version", "summary")
+    for where, path in list_profiles(profiles):
+        try:
+            profile = load_profile(path)
+        except Exception as error:  # a broken bundle is listed, not fatal  # noqa: BLE001
+            table.add_row(where, path.name, "-", f"[red]unreadable: {error}[/]")
+            continue
+        table.add_row(where, profile.name, profile.version, profile.summary().split(": ", 1)[1])
+    console.print(table)
+
+
+@profile_app.command("show")
+def show(
+    profile_ref: str = typer.Argument(..., metavar="NAME_OR_DIR", help="Profile name, folder or .zip."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Draw the pattern and sound to a PNG."),
+) -> None:
+    """Show a profile's components; optionally plot it like the method's Figure 8."""
+    profile = resolve_profile(profile_ref)
+    meta = profile.meta
+    console.print(f"[bold]{profile.summary()}[/]  (version {profile.version})")
+    if meta.description:
+        console.print(meta.description)
+    c = meta.coupling
+    console.print(f"coupling: A_s = {c.c_p:g}·(P − {c.c_op:g}) + {c.c_x:g}·(v − {c.c_ov:g}), "
+                  f"clamped to [0, {c.a_max:g}], smoothing {c.smoothing_ms:g} ms")
+    table = Table("sub-pattern", "frequencies Hz (amplitude)")
+    for index, sub in enumerate(meta.tactile.subpatterns):
+        table.add_row(str(index), "  ".join(f"{comp.frequency_hz:.1f} ({comp.amplitude:.3f})"
+                                            for comp in sub))
+    console.print(table)
+    console.print(f"sound unit: {meta.sound.unit_ms:g} ms from {meta.sound.start_s} s, seam level "
+                  f"jump {meta.sound.seam.get('level_jump_db', float('nan')):.2f} dB")
+    if plot is not None:
+        from ..plots import save_profile_plot  # matplotlib is slow to import; only when asked
+
+        save_profile_plot(profile, plot)
+        console.print(f"wrote {plot}")

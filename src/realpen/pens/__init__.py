@@ -1,0 +1,18 @@
+"""The pens that ship with RealPen (pencil, ballpoint, marker) and the model that makes them.
+
+The bundled profiles are *modelled*, not recorded: see :mod:`realpen.pens.model` and
+``docs/pen-model.md``. ``scripts/make_bundled_pens.py`` regenerates them identically.
+"""
+
+from __future__ import annotations
+
+from importlib.resources import files
+from pathlib import Path
+
+BUNDLED_PENS = ("pencil", "ballpoint", "marker")
+BUNDLE_ACTUATOR = "lra:f0=175,q=8"  # a common LRA; rebuild for your own actuator
+
+
+def bundled_dir() -> Path:
+    """Folder holding the bundled profiles, one sub-folder per pen."""
+    return Path(str(files(__name__) / "bundled"))
