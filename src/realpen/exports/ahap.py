@@ -1,0 +1,147 @@
+"""Apple Core Haptics AHAP: a continuous event shaped by intensity and sharpness curves.
+
+Layout (keys as in Apple's "Representing haptic patterns in AHAP files" and the CHHapticPattern
+key reference):
+
+- ``Version`` 1.0, ``Metadata`` (Project, Created, Description; ignored by the framework);
+- ``HapticContinuous`` events with ``HapticIntensity`` 1 and ``HapticSharpness`` 0 spanning
+  the pattern (split every 30 s: Lofelt's AHAP converter limits a continuous event to 30 s);
+- ``ParameterCurve`` ``HapticIntensityControl`` following the pattern's frame RMS relative to
+  its loudest frame (Core Haptics multiplies the event's intensity by it) and
+  ``HapticSharpnessControl`` following its spectral centroid mapped log-wise from 30–500 Hz to
+  0–1 (Core Haptics adds it to the event's sharpness 0);
+- ``AudioCustom`` events playing the friction-sound unit (``EventWaveformPath``, a 16-bit WAV
+  written beside the AHAP) back to back, one per unit length.
+
+Control-point times are relative to their curve's ``Time`` (Apple: "relative to the start
+time of the parameter curve"; Lofelt's converter wrote absolute times, correct only for its
+first curve, a bug later fixed in other converters such as haptify). Each curve holds at most
+16 control points, consecutive curves sharing their boundary point: Lofelt's converter splits
+curves at 16 points; I found no Apple statement of the limit, so this keeps to the safe side.
+Pattern entries are sorted by time.
+
+What it cannot carry: the superposed components — the engine plays one waveform whose
+intensity and sharpness follow the pattern's RMS and centroid; a loop flag — the file holds
+``repeats`` periods (loop at playback with ``CHHapticAdvancedPatternPlayer.loopEnabled`` and
+``loopEnd`` = the period); a sample-accurate seam between sound units (each unit is its own
+event; Apple: custom waveforms "behave like transient events, with no looping"); the coupling
+of the sound to pressure and speed (Eq. 1), which the app does with dynamic parameters.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import io
+import json
+import math
+
+import numpy as np
+import soundfile as sf
+
+from .. import __version__
+from ..profile import PenProfile
+from . import envelope as env
+from .base import Export, check_repeats
+
+SUFFIX = ".ahap"
+MAX_CURVE_POINTS = 16
+MAX_EVENT_S = 30.0
+LIMITS = (
+    "one waveform at a time: intensity follows the frame RMS, sharpness the spectral centroid",
+    "no loop flag: loop with CHHapticAdvancedPatternPlayer.loopEnabled, loopEnd = period",
+    "sound units are separate AudioCustom events: the seams are only as exact as the "
+    "engine's scheduling",
+)
+
+
+def _curves(parameter: str, times: np.ndarray, values: np.ndarray) -> list[dict]:
+    curves = []
+    start = 0
+    while start < len(times) - 1:
+        stop = min(start + MAX_CURVE_POINTS - 1, len(times) - 1)
+        origin = float(times[start])
+        curves.append({"ParameterCurve": {
+            "ParameterID": parameter,
+            "Time": round(origin, 6),
+            "ParameterCurveControlPoints": [
+                {"Time": round(float(t) - origin, 6), "ParameterValue": round(float(v), 4)}
+                for t, v in zip(times[start:stop + 1], values[start:stop + 1])]}})
+        start = stop
+    return curves
+
+
+def _continuous(total_s: float) -> list[dict]:
+    events = []
+    for index in range(math.ceil(total_s / MAX_EVENT_S - 1e-9)):
+        start = index * MAX_EVENT_S
+        events.append({"Event": {
+            "Time": start, "EventType": "HapticContinuous",
+            "EventDuration": round(min(MAX_EVENT_S, total_s - start), 6),
+            "EventParameters": [{"ParameterID": "HapticIntensity", "ParameterValue": 1.0},
+                                {"ParameterID": "HapticSharpness", "ParameterValue": 0.0}]}})
+    return events
+
+
+def _sounds(unit_s: float, total_s: float, path: str) -> list[dict]:
+    count = math.ceil(total_s / unit_s - 1e-9)
+    return [{"Event": {"Time": round(index * unit_s, 6), "EventType": "AudioCustom",
+                       "EventWaveformPath": path,
+                       "EventParameters": [{"ParameterID": "AudioVolume", "ParameterValue": 1.0}]}}
+            for index in range(count)]
+
+
+def build(profile: PenProfile, repeats: int = 1, sound: bool = True,
+          sound_file: str | None = None, created: str | None = None) -> dict:
+    """The AHAP document of a profile, as a dict ready for ``json.dumps``.
+
+    Args:
+        repeats: periods of the tactile pattern laid end to end.
+        sound: add the friction sound as ``AudioCustom`` events.
+        sound_file: the ``EventWaveformPath`` (default ``<name>-sound.wav``).
+        created: the ``Metadata.Created`` date (default: today, ISO 8601).
+    """
+    repeats = check_repeats(repeats)
+    measured = env.measure(profile.tactile, profile.meta.tactile.rate, source=profile.name)
+    times, intensity = env.loop_curve(measured, measured.intensity, repeats)
+    _, sharp = env.loop_curve(measured, env.sharpness(measured.centroid_hz), repeats)
+    total = measured.period_s * repeats
+    pattern = _continuous(total)
+    pattern += _curves("HapticIntensityControl", times, intensity)
+    pattern += _curves("HapticSharpnessControl", times, sharp)
+    if sound:
+        unit = len(profile.sound) / profile.meta.sound.rate
+        pattern += _sounds(unit, total, sound_file or f"{profile.name}-sound.wav")
+    pattern.sort(key=lambda entry: next(iter(entry.values()))["Time"])
+    return {
+        "Version": 1.0,
+        "Metadata": {"Project": f"RealPen {profile.name}",
+                     "Created": created or _dt.date.today().isoformat(),
+                     "Description": f"{profile.meta.tool}: {total * 1000:g} ms "
+                                    f"({repeats} × {measured.period_s * 1000:g} ms), RealPen "
+                                    f"{__version__}, profile version {profile.version}"},
+        "Pattern": pattern,
+    }
+
+
+def sound_wav(profile: PenProfile) -> bytes:
+    """The sound unit as a 16-bit PCM WAV at its own rate (a format every audio API reads)."""
+    buffer = io.BytesIO()
+    sf.write(buffer, np.clip(profile.sound, -1.0, 1.0), profile.meta.sound.rate,
+             subtype="PCM_16", format="WAV")
+    return buffer.getvalue()
+
+
+def export(profile: PenProfile, repeats: int = 1, sound: bool = True,
+           sound_file: str | None = None) -> Export:
+    """Render the AHAP (and the sound WAV it refers to); see the module docstring."""
+    name = sound_file or f"{profile.name}-sound.wav"
+    document = build(profile, repeats, sound, name)
+    curves = sum("ParameterCurve" in entry for entry in document["Pattern"])
+    audio = sum(entry.get("Event", {}).get("EventType") == "AudioCustom"
+                for entry in document["Pattern"])
+    total = sum(entry["Event"]["EventDuration"] for entry in document["Pattern"]
+                if entry.get("Event", {}).get("EventType") == "HapticContinuous")
+    summary = (f"{total * 1000:g} ms continuous event, {curves} parameter curves"
+               + (f", {audio} AudioCustom events playing {name}" if sound else ""))
+    return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
+                  summary, {name: sound_wav(profile)} if sound else {}, LIMITS)

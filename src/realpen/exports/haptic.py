@@ -1,0 +1,74 @@
+"""Lofelt / Meta Haptics Studio ``.haptic``, data model version 1.0.0.
+
+Fields as in the Lofelt data model (``core/datamodel`` of Lofelt/NiceVibrations: README and
+``src/v1.rs``): ``version`` {major, minor, patch} (required), ``metadata`` (editor, author,
+source, project, tags, description; optional) and ``signals.continuous.envelopes`` with an
+``amplitude`` list of {time, amplitude[, emphasis]} (required, non-empty) and an optional
+``frequency`` list of {time, frequency}. Times are in seconds and must not decrease; amplitude
+and frequency are 0 … 1. The normalised frequency "corresponds with the scaled output of the
+centroid tracker"; no mapping to Hz is published.
+
+The envelopes are the pattern's frame RMS and spectral centroid. Lofelt's own AHAP converter
+plays ``intensity = √amplitude`` and ``sharpness = √frequency``, so this export writes the
+squares of the AHAP export's values — converting this file with Lofelt's tools gives the same
+curves as :mod:`realpen.exports.ahap`. No emphasis is written: the pattern has no transients.
+
+What it cannot carry: the superposed components (one amplitude and one frequency at a time);
+a loop flag — the file holds ``repeats`` periods (the Lofelt SDK loops clips at playback);
+the sound (Haptics Studio pairs a clip with its audio file outside the ``.haptic``).
+"""
+
+from __future__ import annotations
+
+import json
+
+from .. import __version__
+from ..profile import PenProfile
+from . import envelope as env
+from .base import Export, check_repeats
+
+SUFFIX = ".haptic"
+LIMITS = (
+    "one amplitude and one frequency at a time: the RMS envelope and the spectral centroid",
+    "no loop flag: loop the clip at playback",
+    "the sound is not in the .haptic file",
+)
+
+
+def build(profile: PenProfile, repeats: int = 1) -> dict:
+    """The ``.haptic`` document of a profile, as a dict ready for ``json.dumps``.
+
+    Args:
+        repeats: periods of the tactile pattern laid end to end.
+    """
+    repeats = check_repeats(repeats)
+    measured = env.measure(profile.tactile, profile.meta.tactile.rate, source=profile.name)
+    times, intensity = env.loop_curve(measured, measured.intensity, repeats)
+    _, sharp = env.loop_curve(measured, env.sharpness(measured.centroid_hz), repeats)
+    return {
+        "version": {"major": 1, "minor": 0, "patch": 0},
+        "metadata": {
+            "editor": f"RealPen {__version__}",
+            "author": "",
+            "source": f"{profile.name} (profile version {profile.version})",
+            "project": "RealPen",
+            "tags": ["RealPen", profile.name],
+            "description": f"{profile.meta.tool}: {repeats} × "
+                           f"{measured.period_s * 1000:g} ms tactile pattern",
+        },
+        "signals": {"continuous": {"envelopes": {
+            "amplitude": [{"time": round(float(t), 6), "amplitude": round(float(a) ** 2, 4)}
+                          for t, a in zip(times, intensity)],
+            "frequency": [{"time": round(float(t), 6), "frequency": round(float(s) ** 2, 4)}
+                          for t, s in zip(times, sharp)],
+        }}},
+    }
+
+
+def export(profile: PenProfile, repeats: int = 1) -> Export:
+    """Render the ``.haptic`` file of a profile; see the module docstring."""
+    document = build(profile, repeats)
+    points = document["signals"]["continuous"]["envelopes"]["amplitude"]
+    return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
+                  f"{len(points)} amplitude and frequency breakpoints over "
+                  f"{points[-1]['time'] * 1000:g} ms", limits=LIMITS)

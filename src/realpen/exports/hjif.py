@@ -1,0 +1,174 @@
+"""MPEG-I haptics interchange (ISO/IEC 23090-31) ``.hjif``: the components as sine effects.
+
+Unlike the envelope formats, ``.hjif`` carries the superposition itself: every component of
+every sub-pattern becomes a ``Basis`` effect with ``base_signal`` ``"Sine"`` in one
+``VectorialWave`` band, positioned where its sub-pattern starts and shaped by amplitude
+keyframes that reproduce the crossfades between sub-patterns (equal-power ramps approximated by
+five linear keyframes). Summing the effects gives back the tactile pattern.
+
+Field names and constraints follow the MPEG reference software (MPEGGroup/
+HapticReferenceSoftware, ``IOJson.cpp`` loader and its conformance checks), newest version
+found:
+
+- top level: ``version`` ("YYYY" or "YYYY-N", year ≥ 2023; its writer defaults to "2023"),
+  ``profile`` ("Main" or "Simple Parametric"), ``level`` (1 or 2), ``date`` (ISO 8601),
+  ``description``, ``timescale`` (ticks per second; Main ≤ 48000), ``avatars``,
+  ``perceptions``, ``syncs``;
+- perception: ``id``, ``avatar_id`` (0: unspecified), ``description``,
+  ``perception_modality`` ("Vibrotactile"), ``effect_library``, ``channels``, optional
+  ``reference_devices``;
+- channel: ``id``, ``description``, ``gain``, ``mixing_coefficient``, ``body_part_mask``,
+  ``bands`` (level 1: at most 7);
+- band: ``band_type``, ``lower_frequency_limit`` and ``upper_frequency_limit`` (integers, Hz),
+  ``effects``; ``curve_type`` only on Curve bands, ``block_length`` only on WaveletWave bands;
+- effect: ``effect_type`` "Basis", ``position`` (ticks), ``phase`` (rad), ``base_signal``,
+  ``keyframes`` of {``relative_position`` (ticks), ``amplitude_modulation``,
+  ``frequency_modulation`` (integer Hz)}.
+
+Older drafts and the reference software's earlier versions differ: band type "Wave" with
+``encoding_modality`` and ``window_length``, channels called ``tracks`` with
+``mixing_weight``, no ``timescale``/``profile``/``level``/``syncs``. I could not read the
+published standard itself; this follows the newest reference code.
+
+The timescale is the pattern's rate (8000 ticks/s for bundled pens; at most 48000), so
+positions fall on samples. Phases follow RealPen's synthesis, ``a·sin(2πf·t + φ)`` with t from
+the effect's position; I found no statement of the standard's phase origin.
+
+An effect is taken to sound from its position through its last keyframe; pieces of one
+component (below) and effects of consecutive hard-bounded sub-patterns therefore end one tick
+before the next begins.
+
+What it cannot carry: frequencies finer than 1 Hz (``frequency_modulation`` is an integer;
+each effect's phase is set so the rounding error is zero at its middle, and a component is
+split into pieces where needed to keep the error under 0.05 rad at their ends: the sum comes
+back within about 3 % RMS); a loop flag — the file holds ``repeats`` periods, and the first
+fade-in and last fade-out (which wrap around the loop) are cut at the file's ends; the sound.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+
+import numpy as np
+
+from .. import __version__
+from ..profile import ComponentEntry, PenProfile
+from .base import Export, check_repeats
+
+SUFFIX = ".hjif"
+MAX_TIMESCALE = 48000
+RAMP = np.linspace(0.0, 1.0, 5)  # keyframes across each crossfade
+MAX_DRIFT_RAD = 0.05  # phase error allowed at an effect's ends from whole-Hz frequencies
+LIMITS = (
+    "frequencies rounded to whole Hz (phases re-set every piece: ≤ 0.05 rad drift)",
+    "no loop flag: whole periods; the wrap crossfade is cut at the file's two ends",
+    "the sound is not carried",
+)
+
+
+def _ramps(start: int, length: int, fade: int, amplitude: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample times and levels of one component's envelope: fade in, hold, fade out."""
+    if not fade:
+        return np.array([start, start + length], dtype=float), np.array([amplitude, amplitude])
+    gain = np.sin(0.5 * np.pi * RAMP)  # the equal-power ramp of the synthesis
+    times = np.concatenate([start - fade // 2 + fade * RAMP,
+                            start + length - fade // 2 + fade * RAMP])
+    return times, amplitude * np.concatenate([gain, gain[::-1]])
+
+
+def _effect(start: int, length: int, fade: int, component: ComponentEntry, first: int,
+            stop: int, rate: int, timescale: int) -> dict:
+    """The sine effect of one component of the sub-pattern starting at sample ``start``,
+    covering samples ``first`` … ``stop - 1``.
+
+    ``component`` holds frequency (Hz), amplitude (full scale) and phase (rad) at ``start``.
+    """
+    times, levels = _ramps(start, length, fade, component.amplitude)
+    last = stop - 1
+    inside = (times > first) & (times < last)
+    t = np.concatenate([[first], times[inside], [last]])
+    v = np.interp(t, times, levels)
+    ticks, unique = np.unique(np.rint(t * timescale / rate).astype(int), return_index=True)
+    v = v[unique]
+    frequency = max(1, int(round(component.frequency_hz)))
+    # Phase at the effect's position; the whole-Hz rounding error is zero at its middle.
+    phase = (component.phase + 2 * np.pi * component.frequency_hz * (first - start) / rate
+             + np.pi * (component.frequency_hz - frequency) * (last - first) / rate)
+    return {"effect_type": "Basis", "position": int(ticks[0]),
+            "phase": round(float(np.mod(phase, 2 * np.pi)), 6), "base_signal": "Sine",
+            "keyframes": [{"relative_position": int(k - ticks[0]),
+                           "amplitude_modulation": round(float(a), 6),
+                           "frequency_modulation": frequency} for k, a in zip(ticks, v)]}
+
+
+def effects(profile: PenProfile, repeats: int = 1) -> tuple[list[dict], int]:
+    """All sine effects of ``repeats`` periods, sorted by position, and the timescale (ticks/s).
+
+    A component whose whole-Hz frequency would drift more than :data:`MAX_DRIFT_RAD` from its
+    true phase at either end of its span is split into equal pieces, each with its own phase.
+    """
+    tactile = profile.meta.tactile
+    rate = tactile.rate
+    timescale = min(rate, MAX_TIMESCALE)
+    length = int(round(tactile.subpattern_ms * rate / 1000.0))
+    fade = 0
+    if tactile.boundary == "crossfade":
+        fade = int(round(tactile.crossfade_ms * rate / 1000.0))
+    fade = min(fade - fade % 2, length)  # as the synthesis: even, centred on the boundary
+    count = len(tactile.subpatterns)
+    end = length * count * repeats
+    found = []
+    for index in range(count * repeats):
+        start = index * length
+        lo, hi = max(0, start - fade // 2), min(end, start + length + fade - fade // 2)
+        for component in tactile.subpatterns[index % count]:
+            error_hz = abs(component.frequency_hz - max(1, round(component.frequency_hz)))
+            pieces = max(1, int(np.ceil(np.pi * error_hz * (hi - lo) / rate / MAX_DRIFT_RAD)))
+            bounds = np.round(np.linspace(lo, hi, pieces + 1)).astype(int)
+            found += [_effect(start, length, fade, component, int(a), int(b), rate, timescale)
+                      for a, b in zip(bounds[:-1], bounds[1:])]
+    found.sort(key=lambda effect: effect["position"])
+    return found, timescale
+
+
+def build(profile: PenProfile, repeats: int = 1, date: str | None = None) -> dict:
+    """The ``.hjif`` document of a profile, as a dict ready for ``json.dumps``.
+
+    Args:
+        repeats: periods of the tactile pattern laid end to end.
+        date: ISO 8601 date (default: today).
+    """
+    repeats = check_repeats(repeats)
+    found, timescale = effects(profile, repeats)
+    frequencies = [effect["keyframes"][0]["frequency_modulation"] for effect in found]
+    actuator = profile.meta.actuator
+    device = {"id": 0, "name": actuator.spec}
+    if "f0" in actuator.params:
+        device["resonance_frequency"] = float(actuator.params["f0"])
+    band = {"band_type": "VectorialWave",
+            "lower_frequency_limit": int(min(frequencies)),
+            "upper_frequency_limit": int(max(frequencies)),
+            "effects": found}
+    channel = {"id": 0, "description": f"{profile.name} tactile pattern", "gain": 1.0,
+               "mixing_coefficient": 1.0, "body_part_mask": 0, "reference_device_id": 0,
+               "bands": [band]}
+    perception = {"id": 0, "avatar_id": 0,
+                  "description": f"{profile.meta.tool} on paper (RealPen {profile.name})",
+                  "perception_modality": "Vibrotactile", "reference_devices": [device],
+                  "effect_library": [], "channels": [channel]}
+    return {"version": "2023", "profile": "Main", "level": 1,
+            "date": date or _dt.date.today().isoformat(),
+            "description": f"RealPen {__version__}: {profile.name}, {repeats} period(s) of the "
+                           f"tactile pattern, profile version {profile.version}",
+            "timescale": timescale, "avatars": [], "perceptions": [perception], "syncs": []}
+
+
+def export(profile: PenProfile, repeats: int = 1) -> Export:
+    """Render the ``.hjif`` file of a profile; see the module docstring."""
+    document = build(profile, repeats)
+    band = document["perceptions"][0]["channels"][0]["bands"][0]
+    return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
+                  f"{len(band['effects'])} sine effects, {band['lower_frequency_limit']}–"
+                  f"{band['upper_frequency_limit']} Hz, timescale {document['timescale']}/s",
+                  limits=LIMITS)

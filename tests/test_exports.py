@@ -1,0 +1,595 @@
+"""Exports: WAV, C header, AHAP, .haptic, Android, .hjif — library and command line."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+import soundfile as sf
+from scipy.signal import resample as fft_resample
+
+from conftest import assert_clean_failure, run_cli
+from realpen.errors import RealPenError
+from realpen.exports import FORMATS, ahap, android, c_header, export_profile, haptic, hjif, render
+from realpen.exports import envelope as env
+from realpen.exports import wav
+from realpen.exports.base import resample_loop
+from realpen.profile import resolve_profile
+from realpen.tactile import synthesize
+
+PENS = ("pencil", "ballpoint", "marker")
+FRAME_S = 0.010
+
+
+@pytest.fixture(scope="module")
+def pens():
+    return {name: resolve_profile(name) for name in PENS}
+
+
+@pytest.fixture(scope="module")
+def swept(pens):
+    """A profile whose pattern has a strong, known envelope and centroid.
+
+    Sub-pattern k (100 ms) is a sine at 60·(400/60)^(k/14) Hz; the level follows a raised
+    cosine over the period from 0.2 to 1.
+    """
+    base = pens["pencil"]
+    rate = base.meta.tactile.rate
+    t = np.arange(len(base.tactile)) / rate
+    period = len(t) / rate
+    freqs = 60.0 * (400.0 / 60.0) ** (np.arange(15) / 14)
+    level = 0.2 + 0.8 * 0.5 * (1 - np.cos(2 * np.pi * t / period))
+    x = 0.9 * level * np.sin(2 * np.pi * freqs[(t // 0.1).astype(int)] * t)
+    return dataclasses.replace(base, tactile=x.astype(np.float32)), freqs
+
+
+def frame_rms(x: np.ndarray, rate: int) -> tuple[np.ndarray, np.ndarray]:
+    """Independent measure: RMS of consecutive 10 ms frames and their centre times in s."""
+    hop = int(round(FRAME_S * rate))
+    frames = np.asarray(x, dtype=np.float64)[: len(x) // hop * hop].reshape(-1, hop)
+    return np.sqrt((frames ** 2).mean(axis=1)), (np.arange(len(frames)) + 0.5) * hop / rate
+
+
+def component_centroids(profile) -> np.ndarray:
+    """Power-weighted centroid of each sub-pattern's components, from profile.json."""
+    subpatterns = profile.meta.tactile.subpatterns
+    return np.array([sum(c.amplitude ** 2 * c.frequency_hz for c in sub)
+                     / sum(c.amplitude ** 2 for c in sub) for sub in subpatterns])
+
+
+def subpattern_means(times: np.ndarray, values: np.ndarray, count: int, unit_s: float
+                     ) -> np.ndarray:
+    """Mean of a curve over the middle 80 % of each sub-pattern (away from crossfades)."""
+    means = []
+    for k in range(count):
+        grid = np.linspace((k + 0.1) * unit_s, (k + 0.9) * unit_s, 50)
+        means.append(np.interp(grid, times, values).mean())
+    return np.array(means)
+
+
+def assert_follows(times, values, x, rate, minimum=0.9):
+    """The exported curve, read at the frame centres, correlates with the measured frame RMS."""
+    rms, centres = frame_rms(x, rate)
+    curve = np.interp(centres, times, values)
+    r = np.corrcoef(curve, rms)[0, 1]
+    assert r > minimum, r
+
+
+def sorted_times(times) -> bool:
+    return bool(np.all(np.diff(np.asarray(times, dtype=float)) >= 0))
+
+
+# --- envelope --------------------------------------------------------------------------------
+
+def test_envelope_measures_a_known_signal():
+    rate = 8000
+    t = np.arange(12000) / rate
+    x = np.where(t < 0.75, 0.5 * np.sin(2 * np.pi * 100 * t), np.sin(2 * np.pi * 300 * t))
+    measured = env.measure(x, rate)
+    centres = measured.centres_s
+    # The centroid window is 40 ms and wraps around the loop: stay away from both changes.
+    away = (np.abs(centres - 0.75) > 0.03) & (centres > 0.03) & (centres < 1.47)
+    first, second = away & (centres < 0.75), away & (centres > 0.75)
+    assert len(measured.rms) == 150 and measured.period_s == pytest.approx(1.5)
+    assert np.allclose(measured.rms[first], 0.5 / np.sqrt(2), rtol=0.01)
+    assert np.allclose(measured.rms[second], 1 / np.sqrt(2), rtol=0.01)
+    assert np.allclose(measured.centroid_hz[first], 100, rtol=0.03)
+    assert np.allclose(measured.centroid_hz[second], 300, rtol=0.03)
+    assert measured.intensity.max() == pytest.approx(1.0)
+    # The pattern loops: the first frame's window reaches back into the 300 Hz end.
+    assert measured.centroid_hz[0] > 120
+
+
+def test_envelope_refuses_a_silent_pattern():
+    with pytest.raises(RealPenError, match="silent"):
+        env.measure(np.zeros(12000), 8000, source="quiet")
+
+
+def test_sharpness_mapping_is_log_and_invertible():
+    hz = np.array([10.0, 30.0, np.sqrt(30 * 500), 500.0, 900.0])
+    assert env.sharpness(hz) == pytest.approx([0, 0, 0.5, 1, 1])
+    assert env.sharpness_to_hz(env.sharpness(hz[1:4])) == pytest.approx(hz[1:4])
+
+
+def test_loop_curve_spans_the_repeats_and_closes_the_wrap(pens):
+    measured = env.measure(pens["pencil"].tactile, 8000)
+    times, values = env.loop_curve(measured, measured.intensity, repeats=3)
+    assert times[0] == 0 and times[-1] == pytest.approx(4.5)
+    assert np.all(np.diff(times) > 0)
+    assert len(times) == 3 * 150 + 4
+    boundaries = np.isin(np.round(times, 9), [0.0, 1.5, 3.0, 4.5])
+    assert np.ptp(values[boundaries]) == 0
+    assert min(values[0], values[1], values[-2]) <= values[0] <= max(values[1], values[-2])
+
+
+# --- wav ------------------------------------------------------------------------------------
+
+def test_wav_mono_is_the_pattern_and_repeats_tile_it(pens):
+    profile = pens["pencil"]
+    samples, rate = wav.mono_samples(profile)
+    assert rate == 8000 and np.array_equal(samples, profile.tactile)
+    data = render(profile, "wav", repeats=3).data
+    read, rate = sf.read(io.BytesIO(data), dtype="float32")
+    assert rate == 8000 and np.array_equal(read, np.tile(profile.tactile, 3))
+
+
+def test_resampled_loop_stays_seamless():
+    rate, new_rate = 8000, 44100
+    t = np.arange(12000) / rate
+    x = 0.6 * np.sin(2 * np.pi * 120 * t) + 0.3 * np.sin(2 * np.pi * 333.3333333333333 * t)
+    y = resample_loop(x, rate, new_rate)
+    u = np.arange(len(y)) / new_rate
+    expected = 0.6 * np.sin(2 * np.pi * 120 * u) + 0.3 * np.sin(2 * np.pi * 333.3333333333333 * u)
+    assert len(y) == 66150
+    # Accurate everywhere, the two ends (where the loop wraps) included.
+    assert np.max(np.abs(y - expected)) < 2e-3
+    assert np.max(np.abs(y[:50] - expected[:50])) < 2e-3
+    assert np.max(np.abs(y[-50:] - expected[-50:])) < 2e-3
+
+
+def test_resample_refuses_a_rate_that_breaks_the_loop():
+    with pytest.raises(RealPenError, match="--rate: .*whole number of samples"):
+        resample_loop(np.zeros(12000), 8000, 44101)
+    with pytest.raises(RealPenError, match="--rate: must be a positive"):
+        resample_loop(np.zeros(12000), 8000, 0)
+
+
+def test_wav_stereo_puts_sound_left_and_tactile_right(pens):
+    profile = pens["marker"]
+    samples, rate = wav.stereo_samples(profile)
+    assert rate == 48000 and samples.shape == (72000, 2)  # 1500 ms = 5 × the 300 ms sound unit
+    assert np.array_equal(samples[:, 0], np.tile(profile.sound, 5))
+    reference = fft_resample(profile.tactile.astype(np.float64), 72000)  # periodic by nature
+    assert np.max(np.abs(samples[:, 1] - reference)) < 5e-3
+    assert np.corrcoef(samples[:, 1], reference)[0, 1] > 0.9999
+
+
+def test_wav_stereo_refuses_loops_without_a_common_length(pens):
+    profile = pens["pencil"]
+    odd = dataclasses.replace(profile, sound=np.concatenate([profile.sound, profile.sound[:1]]))
+    with pytest.raises(RealPenError, match="no common length"):
+        wav.stereo_samples(odd)
+
+
+# --- c header ------------------------------------------------------------------------------
+
+def test_quantise_scale_and_clipping():
+    codes = c_header.quantise(np.array([-1.0, 0.0, 1.0, 0.5, 1.7, -3.0]))
+    assert codes.tolist() == [1, 2048, 4095, 3072, 4095, 0]
+    assert codes.dtype == np.uint16
+
+
+PROGRAM = """#include <stdio.h>
+#include "{header}"
+int main(void) {{
+    printf("%s %lu %lu %d\\n", {stem}_NAME, (unsigned long){stem}_RATE_HZ,
+           (unsigned long){stem}_LENGTH, {stem}_LOOP);
+    for (unsigned long i = 0; i < {stem}_LENGTH; i++) printf("%u\\n", (unsigned){lower}_tactile[i]);
+    return 0;
+}}
+"""
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler (cc) on this machine")
+@pytest.mark.parametrize("name,rate", [("pencil", None), ("ballpoint", 16000)])
+def test_c_header_compiles_and_its_table_is_the_quantised_pattern(tmp_path, pens, name, rate):
+    profile = pens[name]
+    header = tmp_path / f"{name}_tactile.h"
+    export_profile(profile, "c-header", header, rate=rate)
+    stem = c_header.identifier(name)
+    source = tmp_path / "main.c"
+    source.write_text(PROGRAM.format(header=header.name, stem=stem, lower=stem.lower()))
+    binary = tmp_path / "main"
+    compiled = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-o", str(binary),
+                               str(source)], capture_output=True, text=True)
+    assert compiled.returncode == 0, compiled.stderr
+    lines = subprocess.run([str(binary)], capture_output=True, text=True, check=True).stdout.split()
+    pattern = profile.tactile.astype(np.float64)
+    if rate is not None:
+        pattern = resample_loop(pattern, profile.meta.tactile.rate, rate)
+    expected = np.clip(np.round(2048 + 2047 * pattern), 0, 4095).astype(int)
+    assert lines[:4] == [name, str(rate or 8000), str(len(expected)), "1"]
+    table = np.array(lines[4:], dtype=int)
+    assert len(table) == (12000 if rate is None else 24000)
+    assert np.array_equal(table, expected)
+
+
+# --- ahap ----------------------------------------------------------------------------------
+
+def ahap_curve(document: dict, parameter: str) -> tuple[np.ndarray, np.ndarray]:
+    """The absolute-time curve of one parameter, from its (chunked) parameter curves."""
+    times, values = [], []
+    for entry in document["Pattern"]:
+        curve = entry.get("ParameterCurve")
+        if curve and curve["ParameterID"] == parameter:
+            for point in curve["ParameterCurveControlPoints"]:
+                times.append(curve["Time"] + point["Time"])
+                values.append(point["ParameterValue"])
+    times, values = np.array(times), np.array(values)
+    keep = np.concatenate([[True], np.diff(times) > 1e-9])  # chunks share their boundary point
+    return times[keep], values[keep]
+
+
+@pytest.mark.parametrize("name", PENS)
+def test_ahap_has_the_required_structure(pens, name):
+    document = ahap.build(pens[name], created="2025-01-01")
+    assert document["Version"] == 1.0 and isinstance(document["Pattern"], list)
+    entry_times = [next(iter(entry.values()))["Time"] for entry in document["Pattern"]]
+    assert sorted_times(entry_times)
+    events = [entry["Event"] for entry in document["Pattern"] if "Event" in entry]
+    continuous = [e for e in events if e["EventType"] == "HapticContinuous"]
+    assert len(continuous) == 1 and continuous[0]["Time"] == 0
+    assert continuous[0]["EventDuration"] == pytest.approx(1.5)
+    assert {p["ParameterID"] for p in continuous[0]["EventParameters"]} == {"HapticIntensity",
+                                                                            "HapticSharpness"}
+    audio = [e for e in events if e["EventType"] == "AudioCustom"]
+    assert [e["Time"] for e in audio] == pytest.approx([0, 0.3, 0.6, 0.9, 1.2])
+    assert {e["EventWaveformPath"] for e in audio} == {f"{name}-sound.wav"}
+    curves = [entry["ParameterCurve"] for entry in document["Pattern"] if "ParameterCurve" in entry]
+    assert {c["ParameterID"] for c in curves} == {"HapticIntensityControl",
+                                                  "HapticSharpnessControl"}
+    for curve in curves:
+        points = curve["ParameterCurveControlPoints"]
+        assert 2 <= len(points) <= 16
+        assert points[0]["Time"] == 0  # relative to the curve's own Time
+        assert np.all(np.diff([p["Time"] for p in points]) > 0)
+        assert all(0 <= p["ParameterValue"] <= 1 for p in points)
+    for parameter in ("HapticIntensityControl", "HapticSharpnessControl"):
+        times, _ = ahap_curve(document, parameter)
+        assert times[0] == 0 and times[-1] == pytest.approx(1.5) and np.all(np.diff(times) > 0)
+
+
+@pytest.mark.parametrize("name", PENS)
+def test_ahap_curves_follow_the_pattern(pens, name):
+    profile = pens[name]
+    document = ahap.build(profile)
+    times, intensity = ahap_curve(document, "HapticIntensityControl")
+    assert_follows(times, intensity, profile.tactile, profile.meta.tactile.rate)
+    assert intensity.max() == pytest.approx(1.0, abs=1e-3)
+    times, sharp = ahap_curve(document, "HapticSharpnessControl")
+    hz = subpattern_means(times, env.sharpness_to_hz(sharp), 15, 0.1)
+    expected = component_centroids(profile)
+    assert np.max(np.abs(hz / expected - 1)) < 0.1
+    assert np.corrcoef(hz, expected)[0, 1] > 0.9
+
+
+def test_ahap_follows_a_strongly_varying_pattern(swept):
+    profile, freqs = swept
+    document = ahap.build(profile)
+    times, intensity = ahap_curve(document, "HapticIntensityControl")
+    assert_follows(times, intensity, profile.tactile, 8000, minimum=0.98)
+    assert intensity.min() < 0.3
+    times, sharp = ahap_curve(document, "HapticSharpnessControl")
+    hz = subpattern_means(times, env.sharpness_to_hz(sharp), 15, 0.1)
+    assert np.allclose(hz, freqs, rtol=0.1)
+
+
+def test_ahap_splits_long_patterns_into_30_s_events(pens):
+    document = ahap.build(pens["pencil"], repeats=25, sound=False)
+    continuous = [e["Event"] for e in document["Pattern"]
+                  if e.get("Event", {}).get("EventType") == "HapticContinuous"]
+    assert [(e["Time"], e["EventDuration"]) for e in continuous] == [(0, 30), (30, 7.5)]
+    types = [e.get("Event", {}).get("EventType") for e in document["Pattern"]]
+    assert "AudioCustom" not in types
+    times, _ = ahap_curve(document, "HapticIntensityControl")
+    assert times[-1] == pytest.approx(37.5) and np.all(np.diff(times) > 0)
+
+
+def test_ahap_export_writes_the_sound_it_plays(tmp_path, pens):
+    profile = pens["ballpoint"]
+    written = export_profile(profile, "ahap", tmp_path / "pen.ahap")
+    document = json.loads((tmp_path / "pen.ahap").read_text())
+    paths = {e["Event"]["EventWaveformPath"] for e in document["Pattern"]
+             if e.get("Event", {}).get("EventType") == "AudioCustom"}
+    assert paths == {"pen-sound.wav"} and written.companions == [tmp_path / "pen-sound.wav"]
+    sound, rate = sf.read(tmp_path / "pen-sound.wav")
+    assert rate == 48000 and len(sound) == len(profile.sound)
+    assert np.max(np.abs(sound - profile.sound)) <= 1 / 32768 + 1e-9
+
+
+# --- .haptic --------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", PENS)
+def test_haptic_has_the_v1_fields_and_follows_the_pattern(pens, name):
+    profile = pens[name]
+    document = json.loads(render(profile, "haptic").data)
+    assert document["version"] == {"major": 1, "minor": 0, "patch": 0}
+    envelopes = document["signals"]["continuous"]["envelopes"]
+    amplitude, frequency = envelopes["amplitude"], envelopes["frequency"]
+    assert amplitude and frequency
+    for points, key in ((amplitude, "amplitude"), (frequency, "frequency")):
+        assert set(points[0]) == {"time", key}
+        assert sorted_times([p["time"] for p in points])
+        assert all(0 <= p[key] <= 1 for p in points)
+        assert points[0]["time"] == 0 and points[-1]["time"] == pytest.approx(1.5)
+    times = np.array([p["time"] for p in amplitude])
+    # Lofelt plays intensity = √amplitude: the root follows the RMS.
+    assert_follows(times, np.sqrt([p["amplitude"] for p in amplitude]), profile.tactile, 8000)
+    hz = subpattern_means(times, env.sharpness_to_hz(np.sqrt([p["frequency"] for p in frequency])),
+                          15, 0.1)
+    assert np.max(np.abs(hz / component_centroids(profile) - 1)) < 0.1
+
+
+def test_haptic_amplitude_matches_the_ahap_intensity_squared(pens):
+    profile = pens["pencil"]
+    lofelt = haptic.build(profile)["signals"]["continuous"]["envelopes"]["amplitude"]
+    times, intensity = ahap_curve(ahap.build(profile), "HapticIntensityControl")
+    assert np.allclose([p["time"] for p in lofelt], times, atol=1e-6)
+    assert np.allclose(np.sqrt([p["amplitude"] for p in lofelt]), intensity, atol=2e-3)
+
+
+# --- android --------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", PENS)
+def test_android_waveform_steps_follow_the_pattern(pens, name):
+    profile = pens[name]
+    document = json.loads(render(profile, "android", repeats=2).data)
+    wave = document["waveform"]
+    timings, amplitudes = wave["timings_ms"], wave["amplitudes"]
+    assert len(timings) == len(amplitudes) == 300 and wave["repeat"] == 0
+    assert all(isinstance(v, int) and v > 0 for v in timings) and sum(timings) == 3000
+    assert all(isinstance(v, int) and 0 <= v <= 255 for v in amplitudes) and max(amplitudes) == 255
+    centres = (np.cumsum(timings) - np.asarray(timings) / 2) / 1000
+    assert_follows(centres, np.asarray(amplitudes, dtype=float), np.tile(profile.tactile, 2), 8000)
+
+
+@pytest.mark.parametrize("name", PENS)
+def test_android_envelopes_fit_every_capable_device(pens, name):
+    profile = pens[name]
+    document = android.build(profile)
+    expected = component_centroids(profile)
+    for key, level, tone in (("waveform_envelope", "amplitude", "frequency_hz"),
+                             ("basic_envelope", "intensity", "sharpness")):
+        points = document[key]["control_points"]
+        assert len(points) <= 16
+        durations = [p["duration_ms"] for p in points]
+        assert all(isinstance(d, int) and 20 <= d <= 1000 for d in durations)
+        assert sum(durations) == 1500 + 20  # one period, then the ramp to zero
+        assert points[-1][level] == 0 and all(0 <= p[level] <= 1 for p in points)
+        values = np.array([p[tone] for p in points[:-1]])
+        hz = values if tone == "frequency_hz" else env.sharpness_to_hz(values)
+        assert np.all(hz > expected.min() * 0.8) and np.all(hz < expected.max() * 1.2)
+    assert document["basic_envelope"]["initial_sharpness"] == document["basic_envelope"][
+        "control_points"][0]["sharpness"]
+
+
+def test_android_envelope_follows_a_strongly_varying_pattern(swept):
+    profile, freqs = swept
+    points = android.build(profile)["waveform_envelope"]["control_points"]
+    stamps = np.cumsum([p["duration_ms"] for p in points]) / 1000
+    level = np.array([p["amplitude"] for p in points])
+    # Segment means of the raised-cosine level: low at the ends, 1 in the middle.
+    assert level[len(level) // 2] > 0.8 and level[0] < 0.5 and level[-2] < 0.5
+    hz = np.array([p["frequency_hz"] for p in points[:-2]])
+    truth = np.interp(stamps[:-2], (np.arange(15) + 0.5) * 0.1, freqs)
+    assert np.corrcoef(np.log(hz), np.log(truth))[0, 1] > 0.95
+
+
+def test_android_kotlin_snippet_holds_the_arrays(tmp_path, pens):
+    profile = pens["marker"]
+    export_profile(profile, "android", tmp_path / "Marker.kt")
+    export_profile(profile, "android", tmp_path / "marker.json")
+    source = (tmp_path / "Marker.kt").read_text()
+    document = json.loads((tmp_path / "marker.json").read_text())
+    assert "\n".join(document["kotlin"]) + "\n" == source
+    assert "object MarkerVibration" in source
+    assert "VibrationEffect.createWaveform(TIMINGS, AMPLITUDES, 0)" in source
+    assert "VibrationEffect.WaveformEnvelopeBuilder()" in source
+    assert "VibrationEffect.BasicEnvelopeBuilder()" in source
+    array = re.search(r"intArrayOf\(([^)]*)\)", source).group(1)
+    assert [int(v) for v in array.split(",")] == document["waveform"]["amplitudes"]
+    points = len(document["basic_envelope"]["control_points"])
+    assert source.count(".addControlPoint(") == 2 * points
+    assert source.count("(") == source.count(")") and source.count("{") == source.count("}")
+
+
+# --- hjif -----------------------------------------------------------------------------------
+
+def synthesise_hjif(document: dict, frames: int) -> np.ndarray:
+    """Render a .hjif's sine effects: a(τ)·sin(2π f τ / timescale + phase) from each position."""
+    timescale = document["timescale"]
+    out = np.zeros(frames)
+    for effect in document["perceptions"][0]["channels"][0]["bands"][0]["effects"]:
+        keys = effect["keyframes"]
+        positions = np.array([k["relative_position"] for k in keys])
+        tau = np.arange(positions[-1] + 1)
+        level = np.interp(tau, positions, [k["amplitude_modulation"] for k in keys])
+        signal = level * np.sin(2 * np.pi * keys[0]["frequency_modulation"] * tau / timescale
+                                + effect["phase"])
+        where = effect["position"] + tau
+        inside = where < frames
+        out[where[inside]] += signal[inside]
+    return out
+
+
+@pytest.mark.parametrize("name", PENS)
+def test_hjif_has_the_required_fields(pens, name):
+    profile = pens[name]
+    document = json.loads(render(profile, "hjif").data)
+    for key in ("version", "profile", "level", "date", "description", "timescale", "avatars",
+                "perceptions", "syncs"):
+        assert key in document
+    assert re.fullmatch(r"[0-9]{4}(-[0-9])?", document["version"])
+    assert int(document["version"][:4]) >= 2023
+    assert document["profile"] in ("Main", "Simple Parametric") and document["level"] in (1, 2)
+    assert re.match(r"[0-9]{4}-[01][0-9]-[0-3][0-9]", document["date"])
+    assert isinstance(document["timescale"], int) and 0 < document["timescale"] <= 48000
+    perception = document["perceptions"][0]
+    for key in ("id", "avatar_id", "description", "perception_modality", "channels",
+                "effect_library"):
+        assert key in perception
+    assert perception["perception_modality"] == "Vibrotactile"
+    channel = perception["channels"][0]
+    for key in ("id", "description", "gain", "mixing_coefficient", "body_part_mask", "bands"):
+        assert key in channel
+    assert channel["reference_device_id"] in [d["id"] for d in perception["reference_devices"]]
+    assert len(channel["bands"]) <= 7  # level 1
+    band = channel["bands"][0]
+    assert band["band_type"] == "VectorialWave" and "curve_type" not in band
+    assert "block_length" not in band
+    positions = [effect["position"] for effect in band["effects"]]
+    assert sorted_times(positions) and positions[0] == 0
+    frequencies = set()
+    for effect in band["effects"]:
+        assert effect["effect_type"] == "Basis" and effect["base_signal"] == "Sine"
+        assert isinstance(effect["position"], int) and 0 <= effect["phase"] < 2 * np.pi
+        keys = effect["keyframes"]
+        relative = [k["relative_position"] for k in keys]
+        assert relative[0] == 0 and np.all(np.diff(relative) > 0)
+        assert all(isinstance(r, int) for r in relative)
+        assert all(isinstance(k["frequency_modulation"], int) for k in keys)
+        assert all(0 <= k["amplitude_modulation"] <= 1 for k in keys)
+        frequencies.update(k["frequency_modulation"] for k in keys)
+    assert band["lower_frequency_limit"] == min(frequencies)
+    assert band["upper_frequency_limit"] == max(frequencies)
+    components = sum(len(sub) for sub in profile.meta.tactile.subpatterns)
+    assert components <= len(band["effects"]) <= 3 * components  # pieces bound the Hz drift
+
+
+@pytest.mark.parametrize("name", PENS)
+def test_hjif_sine_effects_add_up_to_the_pattern(pens, name):
+    profile = pens[name]
+    document = hjif.build(profile, repeats=2)
+    x = np.tile(profile.tactile.astype(np.float64), 2)
+    y = synthesise_hjif(document, len(x))
+    inner = slice(20, len(x) - 20)  # the wrap crossfade is cut at the file's two ends
+    error = np.sqrt(np.mean((x[inner] - y[inner]) ** 2) / np.mean(x[inner] ** 2))
+    assert error < 0.05, error  # whole-Hz frequencies; the rest of the structure is exact
+    assert np.corrcoef(x[inner], y[inner])[0, 1] > 0.995
+
+
+@pytest.mark.parametrize("boundary,count,unit_ms", [("hard", 15, 100.0),
+                                                     ("crossfade", 1, 1500.0)])
+def test_hjif_reproduces_other_pattern_layouts(pens, boundary, count, unit_ms):
+    """Hard boundaries, and one 1500 ms sub-pattern (conditions D–F), split into pieces."""
+    base = pens["marker"]
+    subpatterns = base.meta.tactile.subpatterns[:count]
+    x = synthesize(subpatterns, 8000, unit_ms, boundary, 5.0)
+    tactile = base.meta.tactile.model_copy(update={
+        "boundary": boundary, "subpatterns": subpatterns, "subpattern_ms": unit_ms})
+    profile = dataclasses.replace(base, meta=base.meta.model_copy(update={"tactile": tactile}),
+                                  tactile=x.astype(np.float32))
+    document = hjif.build(profile)
+    effects = document["perceptions"][0]["channels"][0]["bands"][0]["effects"]
+    assert len(effects) > len(subpatterns[0])  # a 1500 ms component is split into pieces
+    y = synthesise_hjif(document, len(x))
+    inner = slice(20, len(x) - 20)
+    error = np.sqrt(np.mean((x[inner] - y[inner]) ** 2) / np.mean(x[inner] ** 2))
+    assert error < 0.05, error
+
+
+# --- export_profile -------------------------------------------------------------------------
+
+def test_export_profile_refuses_unknown_formats_and_options(tmp_path, pens):
+    out = tmp_path / "x.out"
+    with pytest.raises(RealPenError, match=r"--format: unknown format 'mp3' \(known: wav, "):
+        export_profile(pens["pencil"], "mp3", out)
+    with pytest.raises(RealPenError, match="--stereo: not used by --format ahap"):
+        export_profile(pens["pencil"], "ahap", out, stereo=True)
+    with pytest.raises(RealPenError, match="--repeats: not used by --format c-header"):
+        export_profile(pens["pencil"], "c-header", out, repeats=2)
+    with pytest.raises(RealPenError, match="--repeats: must be a whole number"):
+        export_profile(pens["pencil"], "haptic", out, repeats=0)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_every_format_renders_every_pen(pens):
+    for name, profile in pens.items():
+        for fmt in FORMATS:
+            result = render(profile, fmt)
+            assert result.data and result.summary and result.limits, (name, fmt)
+
+
+# --- command line ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("fmt,suffix", [("wav", ".wav"), ("c-header", ".h"), ("ahap", ".ahap"),
+                                        ("haptic", ".haptic"), ("android", ".json"),
+                                        ("hjif", ".hjif")])
+def test_cli_exports_each_format(tmp_path, fmt, suffix):
+    out = tmp_path / f"pen{suffix}"
+    result = run_cli("export", "pencil", "--format", fmt, "-o", out)
+    assert result.returncode == 0, result.stderr
+    assert f"wrote {out}" in result.stdout and "cannot carry" in result.stdout
+    assert out.stat().st_size > 0
+    if suffix not in (".wav", ".h"):
+        json.loads(out.read_text())
+    leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+    assert leftovers == []
+
+
+def test_cli_stereo_wav_with_rate_and_repeats(tmp_path):
+    out = tmp_path / "stereo.wav"
+    result = run_cli("export", "marker", "--format", "wav", "--stereo", "--rate", "44100",
+                     "--repeats", "2", "-o", out)
+    assert result.returncode == 0, result.stderr
+    samples, rate = sf.read(out)
+    assert rate == 44100 and samples.shape == (2 * 66150, 2)
+
+
+def bad_case(tmp_path, case):
+    """Arguments of one bad invocation and the text its message must name."""
+    out = tmp_path / "out.file"
+    if case == "unknown_format":
+        return ["export", "pencil", "--format", "mp3", "-o", out], "--format: unknown format 'mp3'"
+    if case == "no_such_profile":
+        return ["export", "quill", "--format", "wav", "-o", out], "quill: no such profile"
+    if case == "broken_bundle":
+        bundle = tmp_path / "broken"
+        bundle.mkdir()
+        (bundle / "profile.json").write_text("{")
+        return ["export", bundle, "--format", "wav", "-o", out], "broken"
+    if case == "stereo_not_wav":
+        return ["export", "pencil", "--format", "ahap", "--stereo", "-o", out], "--stereo"
+    if case == "rate_zero":
+        return ["export", "pencil", "--format", "c-header", "--rate", "0", "-o", out], "--rate"
+    if case == "rate_breaks_loop":
+        return ["export", "pencil", "--format", "wav", "--rate", "44101", "-o", out], "--rate"
+    if case == "rate_not_used":
+        return ["export", "pencil", "--format", "hjif", "--rate", "8000", "-o", out], "--rate"
+    if case == "repeats_zero":
+        return ["export", "pencil", "--format", "haptic", "--repeats", "0", "-o", out], "--repeats"
+    if case == "output_is_folder":
+        return ["export", "pencil", "--format", "wav", "-o", tmp_path], str(tmp_path)
+    if case == "parent_is_file":
+        blocker = tmp_path / "blocker"
+        blocker.write_text("x")
+        return ["export", "pencil", "--format", "haptic", "-o", blocker / "out.haptic"], "blocker"
+    raise AssertionError(case)
+
+
+@pytest.mark.parametrize("case", ["unknown_format", "no_such_profile", "broken_bundle",
+                                  "stereo_not_wav", "rate_zero", "rate_breaks_loop",
+                                  "rate_not_used", "repeats_zero", "output_is_folder",
+                                  "parent_is_file"])
+def test_cli_bad_input_fails_cleanly_and_writes_nothing(tmp_path, case):
+    args, names = bad_case(tmp_path, case)
+    before = {p.name for p in tmp_path.iterdir()}
+    result = run_cli(*args)
+    assert_clean_failure(result, names)
+    assert {p.name for p in tmp_path.iterdir()} == before
