@@ -6,4 +6,13 @@ cd "$(dirname "$0")/.."
 python3 -m venv .venv
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e '.[test]'
+# The browser tests drive Debian's Chromium; install it when missing and we may.
+if [ ! -x /usr/bin/chromium ]; then
+    if [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null 2>&1; then
+        apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y chromium
+    else
+        echo "note: /usr/bin/chromium is missing and installing it needs root and apt-get;" \
+             "the browser tests will be skipped (install the Debian package 'chromium')." >&2
+    fi
+fi
 exec .venv/bin/python -m pytest "$@"

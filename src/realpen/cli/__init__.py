@@ -38,5 +38,5 @@ def main() -> None:
 from . import tactile_cmds  # noqa: E402,F401
 from . import sound_cmds  # noqa: E402,F401
 from . import profile_cmds  # noqa: E402,F401
-from . import export_cmds  # noqa: E402,F401
 from . import serve_cmds  # noqa: E402,F401
+from . import export_cmds  # noqa: E402,F401

@@ -1,0 +1,114 @@
+"""``realpen serve`` (the live app) and ``realpen strokes export``."""
+
+from __future__ import annotations
+
+import ipaddress
+import signal
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from ..errors import RealPenError
+from ..paths import default_store
+from . import app
+from .common import console
+
+TACTILE_CHOICES = ("audio", "none")
+
+strokes_app = typer.Typer(help="The strokes the live app stored.", no_args_is_help=True)
+app.add_typer(strokes_app, name="strokes")
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+@app.command()
+def serve(
+    host: Optional[str] = typer.Option(
+        None, "--host", help="Address to listen on (default 127.0.0.1; with --lan 0.0.0.0)."),
+    port: int = typer.Option(8765, "--port", help="Port to listen on (0: any free port)."),
+    profiles: List[Path] = typer.Option(
+        [], "--profiles", help="A folder of extra pen profiles (repeatable)."),
+    store: Optional[Path] = typer.Option(
+        None, "--store", help="SQLite stroke store (default: strokes.sqlite3 in the data folder)."),
+    tactile: str = typer.Option(
+        "none", "--tactile",
+        help="audio: the tactile pattern plays on the right audio channel (sound on the left), "
+             "for an actuator on an amplifier | none: touch only on the pen's own device."),
+    lan: bool = typer.Option(
+        False, "--lan", help="Listen on all interfaces for a tablet on the same network; every "
+                             "request then needs the random token in the printed URL."),
+) -> None:
+    """Start the live app: open the printed URL, pick a pen, and write."""
+    from ..live.app import LiveSettings, create_app
+    from ..live.auth import LOOPBACK_HOSTS, new_token
+    from ..live.server import bind, lan_address, run, url_host
+
+    if tactile not in TACTILE_CHOICES:
+        raise RealPenError(f"--tactile: choose audio or none, got '{tactile}'")
+    if not 0 <= port <= 65535:
+        raise RealPenError(f"--port: {port} is not a port number (0–65535)")
+    host = host or ("0.0.0.0" if lan else "127.0.0.1")
+    if not lan and not _is_loopback(host):
+        raise RealPenError(f"--host {host}: other machines could reach it; add --lan (every "
+                           f"request then needs a random token)")
+    store = store or default_store()
+    token = new_token() if lan else None
+    settings = LiveSettings(store=store, profiles=list(profiles), tactile=tactile, token=token,
+                            allowed_hosts=None if lan else LOOPBACK_HOSTS)
+    live_app = create_app(settings)
+    sock = bind(host, port)
+    port = sock.getsockname()[1]
+    query = f"?token={token}" if token else ""
+    shown = lan_address() if lan and host in ("0.0.0.0", "::") else host
+    print(f"RealPen live: http://{url_host(shown)}:{port}/{query}", flush=True)
+    if lan:
+        print(f"  (open it on the tablet; on this machine: http://127.0.0.1:{port}/{query})",
+              flush=True)
+    state = live_app.state.live
+    print(f"  pens: {', '.join(state.catalog.names)} | tactile: "
+          f"{'audio, right channel' if tactile == 'audio' else 'none (pen device)'} | "
+          f"store: {store}", flush=True)
+    for problem in state.catalog.skipped:
+        print(f"  skipped profile: {problem}", flush=True)
+    print("  Ctrl-C stops the server.", flush=True)
+    # uvicorn stops gracefully on SIGINT/SIGTERM, then re-raises the signal: end quietly.
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        run(live_app, sock)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        sock.close()
+    strokes, samples = state.final_counts or (0, 0)
+    print(f"stopped: the store holds {strokes} strokes, {samples} samples ({store})", flush=True)
+
+
+@strokes_app.command("export")
+def export(
+    output: Path = typer.Option(..., "-o", "--output", help="CSV to write, one row per sample."),
+    store: Optional[Path] = typer.Option(
+        None, "--store", help="SQLite stroke store (default: strokes.sqlite3 in the data folder)."),
+    stroke: Optional[int] = typer.Option(
+        None, "--stroke", help="Only this stroke (its id in the store): a trajectory for "
+                               "`realpen sound render`."),
+) -> None:
+    """Write the stored strokes as CSV: stroke, pen, modality, …, t, x, y, pressure, tilt, speed."""
+    from ..live.store import export_csv
+
+    store = store or default_store()
+    strokes, rows = export_csv(store, output, stroke)
+    console.print(f"wrote {output}: {rows} samples of {strokes} strokes from {store}",
+                  highlight=False)

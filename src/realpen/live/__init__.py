@@ -1,0 +1,13 @@
+"""The live RealPen app: write with a stylus in a browser, hear and feel the pen.
+
+``realpen serve`` starts a FastAPI app (:func:`realpen.live.app.create_app`) that serves a
+plain-ES-module page (``static/``), the pen profiles and their audio, and a WebSocket for pen
+events. The pieces:
+
+- :mod:`~realpen.live.messages` — the pydantic schema of every WebSocket message;
+- :mod:`~realpen.live.session` — what one page's messages do (store, device, replies);
+- :mod:`~realpen.live.store` — the SQLite stroke store and its CSV export;
+- :mod:`~realpen.live.device` — the seam for the pen's own hardware and the simulated device;
+- :mod:`~realpen.live.catalog` — the profiles the server offers;
+- :mod:`~realpen.live.auth` — the ``--lan`` token, Host and Origin checks.
+"""

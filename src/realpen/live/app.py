@@ -1,0 +1,187 @@
+"""The live app's FastAPI factory: thin routes over the catalog, the session, store and device.
+
+Routes (all behind :class:`~realpen.live.auth.AccessGuard`):
+
+``GET /``                                    the writing page
+``GET /static/…``                            its ES modules and style sheet
+``GET /api/config``                          what the page needs to know about the server
+``GET /api/profiles``                        the pens offered (name, version, coupling, …)
+``GET /api/profiles/{name}/sound.wav``       a pen's sound unit (32-bit float WAV)
+``GET /api/profiles/{name}/tactile.wav``     a pen's tactile pattern (32-bit float WAV)
+``GET /api/device/log?since=N``              the simulated device's command log
+``GET /api/status``                          pages connected, strokes and samples stored
+``WS  /ws``                                  pen events (:mod:`realpen.live.messages`)
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+from importlib.resources import files
+from pathlib import Path
+from typing import Literal
+
+from fastapi import FastAPI, HTTPException, Query, WebSocket, WebSocketDisconnect
+from fastapi.responses import HTMLResponse, Response
+from fastapi.staticfiles import StaticFiles
+
+from .. import __version__
+from ..paths import default_store
+from .auth import LOOPBACK_HOSTS, AccessGuard
+from .catalog import Catalog
+from .device import PenDevice, SimulatedDevice
+from .messages import MAX_MESSAGE_BYTES, MAX_SAMPLES, MODALITIES, PROTOCOL
+from .session import Session
+from .store import StrokeStore
+
+STATIC_DIR = Path(str(files(__package__) / "static"))
+NO_CACHE = {"Cache-Control": "no-cache"}
+
+
+@dataclass
+class LiveSettings:
+    """How a live app is set up.
+
+    Attributes:
+        store: the SQLite stroke store (None: :func:`realpen.paths.default_store`).
+        profiles: extra folders of profiles (``--profiles``), after the bundled and user ones.
+        tactile: ``"audio"`` plays the tactile pattern on the right audio channel by default
+            (the page can toggle it); ``"none"`` leaves touch to the pen's own device.
+        token: when set, every request must carry it (``--lan`` sets a random one).
+        allowed_hosts: host names the ``Host`` header may name (None: any). Loopback-only
+            serving passes :data:`~realpen.live.auth.LOOPBACK_HOSTS`.
+        device: what pen commands drive (None: a new :class:`SimulatedDevice`).
+        max_message_bytes: the size limit of one WebSocket message.
+    """
+
+    store: Path | None = None
+    profiles: list[Path] = field(default_factory=list)
+    tactile: Literal["audio", "none"] = "none"
+    token: str | None = None
+    allowed_hosts: tuple[str, ...] | None = None
+    device: PenDevice | None = None
+    max_message_bytes: int = MAX_MESSAGE_BYTES
+
+    @classmethod
+    def loopback(cls, **kwargs) -> "LiveSettings":
+        """Settings for a server that only listens on 127.0.0.1 (Host must be loopback)."""
+        return cls(allowed_hosts=LOOPBACK_HOSTS, **kwargs)
+
+
+class NoCacheStatic(StaticFiles):
+    """Static files the browser revalidates every time (no stale modules after an upgrade)."""
+
+    def file_response(self, *args, **kwargs) -> Response:
+        response = super().file_response(*args, **kwargs)
+        response.headers.update(NO_CACHE)
+        return response
+
+
+@dataclass
+class LiveState:
+    """Everything the routes share."""
+
+    settings: LiveSettings
+    catalog: Catalog
+    store: StrokeStore
+    device: PenDevice
+    sessions: dict[str, Session] = field(default_factory=dict)
+    final_counts: tuple[int, int] | None = None  # (strokes, samples) when the store closed
+
+    def open_session(self) -> Session:
+        session = Session(self.catalog, self.store, self.device, self.settings.max_message_bytes)
+        self.sessions[session.id] = session
+        return session
+
+    def close_session(self, session: Session) -> None:
+        session.close()
+        self.sessions.pop(session.id, None)
+
+    def shutdown(self) -> None:
+        for session in list(self.sessions.values()):
+            self.close_session(session)
+        self.final_counts = self.store.count()
+        self.store.close()
+        self.device.close()
+
+
+def create_app(settings: LiveSettings | None = None) -> FastAPI:
+    """Build the live app. Profiles are loaded and the store opened here, so problems with them
+    surface as :class:`~realpen.errors.RealPenError` before serving; the store is closed (every
+    stroke committed) when the app shuts down.
+    """
+    settings = settings or LiveSettings()
+    catalog = Catalog(settings.profiles)
+    store = StrokeStore(settings.store or default_store())
+    state = LiveState(settings, catalog, store, settings.device or SimulatedDevice())
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI):
+        try:
+            yield
+        finally:
+            state.shutdown()
+
+    app = FastAPI(title="RealPen live", version=__version__, lifespan=lifespan,
+                  docs_url=None, redoc_url=None, openapi_url=None)
+    app.state.live = state
+    app.add_middleware(AccessGuard, token=settings.token, allowed_hosts=settings.allowed_hosts)
+    app.mount("/static", NoCacheStatic(directory=STATIC_DIR), name="static")
+
+    @app.get("/", response_class=HTMLResponse)
+    def page() -> HTMLResponse:
+        return HTMLResponse((STATIC_DIR / "index.html").read_text(encoding="utf-8"),
+                            headers=NO_CACHE)
+
+    @app.get("/api/config")
+    def config() -> dict:
+        return {"realpen": __version__, "protocol": PROTOCOL, "tactile": settings.tactile,
+                "token_required": settings.token is not None, "device": state.device.name,
+                "modalities": list(MODALITIES), "max_message_bytes": settings.max_message_bytes,
+                "max_samples": MAX_SAMPLES}
+
+    @app.get("/api/profiles")
+    def profiles() -> dict:
+        return {"profiles": catalog.to_json()}
+
+    @app.get("/api/profiles/{name}/{part}.wav")
+    def profile_audio(name: str, part: Literal["sound", "tactile"]) -> Response:
+        entry = catalog.get(name)
+        if entry is None:
+            raise HTTPException(404, f"no profile '{name}'")
+        data = entry.sound_wav if part == "sound" else entry.tactile_wav
+        return Response(data, media_type="audio/wav",
+                        headers={**NO_CACHE, "ETag": f'"{entry.profile.version}-{part}"'})
+
+    @app.get("/api/device/log")
+    def device_log(since: int = Query(0, ge=0),
+                   limit: int = Query(100_000, ge=1, le=100_000)) -> dict:
+        entries = getattr(state.device, "entries", None)
+        if entries is None:
+            raise HTTPException(404, f"the {state.device.name} device keeps no log")
+        return {"device": state.device.name, "count": state.device.count,
+                "entries": [entry.to_json() for entry in entries(since, limit)]}
+
+    @app.get("/api/status")
+    def status() -> dict:
+        strokes, samples = store.count()
+        return {"pages": len(state.sessions), "strokes": strokes, "samples": samples,
+                "store": str(store.path)}
+
+    @app.websocket("/ws")
+    async def pen_events(websocket: WebSocket) -> None:
+        await websocket.accept()
+        session = state.open_session()
+        try:
+            while True:
+                frame = await websocket.receive()
+                if frame["type"] == "websocket.disconnect":
+                    break
+                raw = frame["text"] if frame.get("text") is not None else frame.get("bytes", b"")
+                await websocket.send_text(session.handle(raw).model_dump_json(exclude_none=True))
+        except (WebSocketDisconnect, OSError, RuntimeError):
+            pass
+        finally:
+            state.close_session(session)
+
+    return app

@@ -1,0 +1,186 @@
+"""Every WebSocket message of the live app, as pydantic schemas (protocol 1).
+
+The page sends JSON text frames, one message each, told apart by ``type``:
+
+``hello``     once per connection: who is talking (``client``) and the ``protocol`` number;
+``pen_down``  a stroke starts: the pen (profile name and content version), the modality, the
+              ink (visible or hidden), the pointer type and the page's calibration (px/mm);
+``samples``   a batch of the stroke's samples (the coalesced pointer events of one event);
+``gain``      the stroke's new target gain (Eq. 1 before smoothing), for the pen's actuator;
+``pen_up``    the stroke ends.
+
+Every message carries ``seq``, the page's message counter, and the server replies to each with
+``ack`` (echoing ``seq``, with the server's receive time) or ``error`` (a ``code`` and a
+one-line ``message``; ``seq`` when it could be read). A message larger than
+:data:`MAX_MESSAGE_BYTES` or holding more than :data:`MAX_SAMPLES` samples is refused.
+
+Units: ``t`` in seconds on the page's clock (``performance.now() / 1000``); ``x``, ``y`` in mm
+from the writing surface's top-left corner (CSS pixels over the calibration); ``pressure``
+normalised 0–1 (a mouse reports the constant 0.5); ``tilt_x``, ``tilt_y`` in degrees
+(−90–90, Pointer Events); ``speed`` in mm/s as the page computed it for Eq. 1.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+
+from ..profile import NAME_PATTERN
+
+PROTOCOL = 1
+MAX_MESSAGE_BYTES = 64 * 1024
+MAX_SAMPLES = 512
+MODALITIES = ("tactile", "auditory", "auditory-tactile", "none")
+
+Modality = Literal["tactile", "auditory", "auditory-tactile", "none"]
+Ink = Literal["visible", "hidden"]
+PointerType = Literal["pen", "touch", "mouse", "unknown"]
+ErrorCode = Literal["binary", "too_large", "invalid_json", "invalid_message", "protocol",
+                    "unknown_pen", "store", "internal"]
+
+Seq = Annotated[int, Field(ge=0, le=2**53)]
+StrokeNo = Annotated[int, Field(ge=0, le=2**53)]
+Time = Annotated[float, Field(ge=-1e9, le=1e12)]
+Millimetres = Annotated[float, Field(ge=-1e6, le=1e6)]
+
+
+class _Message(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class Hello(_Message):
+    """First message of a connection."""
+
+    type: Literal["hello"]
+    seq: Seq
+    client: str = Field(min_length=1, max_length=200)
+    protocol: Literal[1] = PROTOCOL
+
+
+class Sample(_Message):
+    """One pen sample (a coalesced pointer event)."""
+
+    t: Time
+    x: Millimetres
+    y: Millimetres
+    pressure: float = Field(ge=0, le=1)
+    tilt_x: float = Field(0.0, ge=-90, le=90)
+    tilt_y: float = Field(0.0, ge=-90, le=90)
+    speed: float = Field(ge=0, le=1e6)
+
+
+class PenDown(_Message):
+    """A stroke starts."""
+
+    type: Literal["pen_down"]
+    seq: Seq
+    stroke: StrokeNo
+    t: Time
+    pen: str = Field(pattern=NAME_PATTERN)
+    profile_version: str = Field(pattern=r"^[0-9a-f]{12}$")
+    modality: Modality
+    ink: Ink = "visible"
+    pointer_type: PointerType = "pen"
+    px_per_mm: float = Field(gt=0, le=1000)
+    calibrated: bool = False
+
+
+class Samples(_Message):
+    """A batch of samples of the open stroke."""
+
+    type: Literal["samples"]
+    seq: Seq
+    stroke: StrokeNo
+    samples: list[Sample] = Field(min_length=1, max_length=MAX_SAMPLES)
+
+
+class Gain(_Message):
+    """The open stroke's new target gain: Eq. 1 before smoothing (the device smooths)."""
+
+    type: Literal["gain"]
+    seq: Seq
+    stroke: StrokeNo
+    t: Time
+    target: float = Field(ge=0, le=1000)
+
+
+class PenUp(_Message):
+    """The stroke ends."""
+
+    type: Literal["pen_up"]
+    seq: Seq
+    stroke: StrokeNo
+    t: Time
+
+
+ClientMessage = Annotated[Union[Hello, PenDown, Samples, Gain, PenUp],
+                          Field(discriminator="type")]
+CLIENT_MESSAGE: TypeAdapter = TypeAdapter(ClientMessage)
+
+
+class Ack(_Message):
+    """Reply to a message the server accepted."""
+
+    type: Literal["ack"] = "ack"
+    seq: int
+    of: str
+    server_ns: int = Field(description="time.monotonic_ns() when the message arrived")
+    session: str | None = None
+    stroke_id: int | None = None
+
+
+class Error(_Message):
+    """Reply to a message the server refused; the connection stays open."""
+
+    type: Literal["error"] = "error"
+    seq: int | None = None
+    code: ErrorCode
+    message: str
+
+
+class MessageError(Exception):
+    """A message that cannot be accepted; becomes an :class:`Error` reply."""
+
+    def __init__(self, code: str, message: str, seq: int | None = None):
+        super().__init__(message)
+        self.code, self.message, self.seq = code, message, seq
+
+    def reply(self) -> Error:
+        return Error(seq=self.seq, code=self.code, message=self.message)
+
+
+def _salvage_seq(raw: str) -> int | None:
+    """The ``seq`` of a message that failed validation, when it can be read."""
+    try:
+        document = json.loads(raw)
+    except ValueError:
+        return None
+    seq = document.get("seq") if isinstance(document, dict) else None
+    return seq if isinstance(seq, int) and not isinstance(seq, bool) and 0 <= seq <= 2**53 \
+        else None
+
+
+def parse_message(raw: str | bytes, limit: int = MAX_MESSAGE_BYTES):
+    """Validate one WebSocket frame and return the message model.
+
+    Raises:
+        MessageError: a binary frame, a frame over ``limit`` bytes, invalid JSON or a schema
+            violation (the message names the first offending field).
+    """
+    if isinstance(raw, (bytes, bytearray)):
+        raise MessageError("binary", "send JSON text frames, not binary frames")
+    size = len(raw) if len(raw) * 4 <= limit else len(raw.encode("utf-8", "surrogatepass"))
+    if size > limit:
+        raise MessageError("too_large", f"message is {size} bytes; the limit is {limit}")
+    try:
+        return CLIENT_MESSAGE.validate_json(raw)
+    except ValidationError as error:
+        first = error.errors(include_url=False)[0]
+        if first["type"] == "json_invalid":
+            detail = first.get("ctx", {}).get("error", "")
+            raise MessageError("invalid_json", f"not valid JSON ({detail})") from None
+        where = ".".join(str(part) for part in first["loc"])
+        text = f"{where}: {first['msg']}" if where else first["msg"]
+        raise MessageError("invalid_message", text, _salvage_seq(raw)) from None

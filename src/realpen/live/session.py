@@ -1,0 +1,143 @@
+"""What one page's WebSocket messages do: validate, drive the device, store, reply.
+
+One :class:`Session` per connection. A page has at most one stroke down at a time; a new
+``pen_down`` while one is down ends it first (reason ``replaced``), and a connection that
+closes with a stroke down ends it (``disconnect``), so the device always hears a ``pen_up`` for
+every ``pen_down`` and no stroke is left open in the store.
+
+The device is told first and the store second, so the pen's actuator never waits for the disk.
+Nothing a page sends can raise out of :meth:`Session.handle`: every problem becomes an
+``error`` reply and the connection stays open.
+"""
+
+from __future__ import annotations
+
+import logging
+import sqlite3
+import time
+import uuid
+from dataclasses import dataclass
+
+from .catalog import Catalog
+from .device import Origin, PenDevice
+from .messages import (MAX_MESSAGE_BYTES, Ack, Error, Gain, Hello, MessageError, PenDown,
+                       PenUp, Samples, parse_message)
+from .store import StrokeStore
+
+log = logging.getLogger(__name__)
+TACTILE_MODALITIES = ("tactile", "auditory-tactile")
+
+
+@dataclass
+class OpenStroke:
+    """The stroke a page has down."""
+
+    number: int
+    stroke_id: int
+    a_max: float
+    tactile: bool
+
+
+class Session:
+    """The server side of one page connection."""
+
+    def __init__(self, catalog: Catalog, store: StrokeStore, device: PenDevice,
+                 max_message_bytes: int = MAX_MESSAGE_BYTES):
+        self.id = uuid.uuid4().hex[:12]
+        self.catalog, self.store, self.device = catalog, store, device
+        self.max_message_bytes = max_message_bytes
+        self.stroke: OpenStroke | None = None
+        self.received = self.refused = 0
+
+    def handle(self, raw: str | bytes) -> Ack | Error:
+        """Handle one frame and return the reply to send."""
+        arrived = time.monotonic_ns()
+        self.received += 1
+        message = None
+        try:
+            message = parse_message(raw, self.max_message_bytes)
+            extra = self._dispatch(message)
+            return Ack(seq=message.seq, of=message.type, server_ns=arrived, **extra)
+        except MessageError as error:
+            self.refused += 1
+            if error.seq is None and message is not None:
+                error.seq = message.seq
+            return error.reply()
+        except sqlite3.Error as error:
+            self.refused += 1
+            log.error("stroke store: %s", error)
+            return Error(seq=getattr(message, "seq", None), code="store",
+                         message=f"the stroke store could not record it ({error})")
+        except Exception:  # a bug must not take the connection or the server down
+            self.refused += 1
+            log.exception("session %s: unexpected error", self.id)
+            return Error(seq=getattr(message, "seq", None), code="internal",
+                         message="internal error (logged on the server)")
+
+    def _dispatch(self, message) -> dict:
+        if isinstance(message, Samples):
+            self._require(message.stroke)
+            rows = [(s.t, s.x, s.y, s.pressure, s.tilt_x, s.tilt_y, s.speed)
+                    for s in message.samples]
+            self.store.add_samples(self.stroke.stroke_id, rows)
+            return {}
+        if isinstance(message, Gain):
+            stroke = self._require(message.stroke)
+            if message.target > stroke.a_max * (1 + 1e-9):
+                raise MessageError("invalid_message", f"gain.target: {message.target:g} is above "
+                                   f"the pen's a_max {stroke.a_max:g}")
+            if stroke.tactile:
+                self.device.gain(Origin(self.id, message.stroke, message.seq), message.target)
+            return {}
+        if isinstance(message, PenDown):
+            return self._pen_down(message)
+        if isinstance(message, PenUp):
+            self._require(message.stroke)
+            self._end("pen_up", message.seq)
+            return {}
+        if isinstance(message, Hello):
+            return {"session": self.id}
+        raise MessageError("invalid_message", f"unhandled message type {message.type}")
+
+    def _pen_down(self, message: PenDown) -> dict:
+        entry = self.catalog.get(message.pen)
+        if entry is None:
+            raise MessageError("unknown_pen", f"pen_down.pen: no profile '{message.pen}' on this "
+                               f"server (known: {', '.join(self.catalog.names)})")
+        profile = entry.profile
+        if message.profile_version != profile.version:
+            raise MessageError("unknown_pen", f"pen_down.profile_version: the page has "
+                               f"'{message.pen}' version {message.profile_version}, the server "
+                               f"{profile.version}; reload the page")
+        if self.stroke is not None:
+            self._end("replaced", message.seq)
+        tactile = message.modality in TACTILE_MODALITIES
+        self.device.pen_down(Origin(self.id, message.stroke, message.seq), profile, tactile)
+        stroke_id = self.store.begin_stroke(
+            session=self.id, page_stroke=message.stroke, pen=profile.name,
+            profile_version=profile.version, modality=message.modality, ink=message.ink,
+            pointer_type=message.pointer_type, px_per_mm=message.px_per_mm,
+            calibrated=message.calibrated, page_t0=message.t)
+        self.stroke = OpenStroke(message.stroke, stroke_id, profile.meta.coupling.a_max, tactile)
+        return {"stroke_id": stroke_id}
+
+    def _require(self, number: int) -> OpenStroke:
+        if self.stroke is None or self.stroke.number != number:
+            down = "no stroke is down" if self.stroke is None else \
+                f"stroke {self.stroke.number} is down"
+            raise MessageError("protocol", f"stroke {number} is not down ({down})")
+        return self.stroke
+
+    def _end(self, reason: str, seq: int | None = None) -> None:
+        stroke, self.stroke = self.stroke, None
+        if stroke is None:
+            return
+        self.device.pen_up(Origin(self.id, stroke.number, seq))
+        self.store.end_stroke(stroke.stroke_id, reason)
+
+    def close(self) -> None:
+        """The connection closed: end a stroke left down."""
+        try:
+            self._end("disconnect")
+        except Exception:
+            log.exception("session %s: closing", self.id)

@@ -1,0 +1,96 @@
+"""Helpers for the live-app tests: a real ``realpen serve`` in a subprocess, pen messages."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import select
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+from realpen.profile import resolve_profile
+
+URL_LINE = re.compile(r"RealPen live: (http://\S+)")
+
+
+@dataclass
+class Served:
+    """A running server: its printed URL, base URL (no query), token, and process."""
+
+    url: str
+    base: str
+    token: str | None
+    process: subprocess.Popen
+    output: list[str]
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 20) -> str:
+        """Send ``sig``, wait for exit, return the rest of stdout."""
+        if self.process.poll() is None:
+            self.process.send_signal(sig)
+        self.process.wait(timeout=timeout)
+        self.output.append(self.process.stdout.read())  # buffered lines included
+        return "".join(self.output)
+
+
+@contextlib.contextmanager
+def serve(tmp_path: Path, *args: str, timeout: float = 30) -> Iterator[Served]:
+    """Run ``realpen serve --port 0 --store tmp/strokes.sqlite3 ARGS`` until the block ends."""
+    env = {**os.environ, "REALPEN_HOME": str(tmp_path / "home"), "PYTHONUNBUFFERED": "1"}
+    store = [] if "--store" in args else ["--store", str(tmp_path / "strokes.sqlite3")]
+    command = [sys.executable, "-m", "realpen.cli", "serve", "--port", "0", *store, *args]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True, env=env)
+    lines: list[str] = []
+    deadline = time.monotonic() + timeout
+    match = None
+    try:
+        while match is None:
+            if process.poll() is not None or time.monotonic() > deadline:
+                rest = process.stdout.read() if process.poll() is not None else ""
+                raise RuntimeError(f"realpen serve did not start: {''.join(lines)}{rest}")
+            ready, _, _ = select.select([process.stdout], [], [], 0.2)
+            if ready:
+                line = process.stdout.readline()
+                lines.append(line)
+                match = URL_LINE.search(line)
+        url = match.group(1)
+        token = url.split("?token=")[1] if "?token=" in url else None
+        served = Served(url, url.split("?")[0], token, process, lines)
+        yield served
+    finally:
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+            try:
+                process.communicate(timeout=20)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.communicate()
+
+
+def stroke_messages(pen: str = "pencil", stroke: int = 1, modality: str = "auditory-tactile",
+                    n: int = 20, t0: float = 10.0, seq0: int = 1, pressure: float = 0.6,
+                    speed: float = 60.0) -> list[dict]:
+    """pen_down, then per sample a gain and a one-sample batch, then pen_up."""
+    profile = resolve_profile(pen)
+    coupling = profile.meta.coupling
+    messages = [{"type": "pen_down", "stroke": stroke, "t": t0, "pen": pen,
+                 "profile_version": profile.version, "modality": modality, "ink": "visible",
+                 "pointer_type": "pen", "px_per_mm": 4.0, "calibrated": True}]
+    for i in range(n):
+        t = t0 + i * 0.005
+        v = 0.0 if i == 0 else speed
+        target = float(coupling.gain_raw(pressure, v))
+        messages.append({"type": "gain", "stroke": stroke, "t": t, "target": target})
+        messages.append({"type": "samples", "stroke": stroke, "samples": [
+            {"t": t, "x": 10 + i * speed * 0.005, "y": 20.0, "pressure": pressure,
+             "tilt_x": 12.0, "tilt_y": -3.0, "speed": v}]})
+    messages.append({"type": "pen_up", "stroke": stroke, "t": t0 + n * 0.005})
+    for i, message in enumerate(messages):
+        message["seq"] = seq0 + i
+    return messages
