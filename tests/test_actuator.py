@@ -29,7 +29,8 @@ def test_piezo_and_flat():
 @pytest.mark.parametrize("spec, message", [
     ("lra:f0=abc", "not a number"),
     ("lra:w=3", "not a parameter"),
-    ("lra:q=-1", "must be positive"),
+    ("lra:q=-1", "must be a positive"),
+    ("lra:f0=inf", "must be a positive finite"),
     ("voicecoil", "unknown actuator"),
 ])
 def test_bad_specs(spec, message):

@@ -41,7 +41,8 @@ def test_tactile_writes_pattern_and_json(tmp_path):
     assert doc["parameters"]["condition"] == "B" and doc["parameters"]["seed"] == 3
     assert len(doc["subpatterns"]) == 15
     component = doc["subpatterns"][0][0]
-    assert set(component) == {"frequency_hz", "power", "weight", "amplitude", "phase", "clipped"}
+    assert set(component) == {"frequency_hz", "power", "weight", "amplitude", "phase", "clipped",
+                              "joins_previous", "joins_next"}
     # The JSON is enough to rebuild the WAV.
     t = np.arange(800) / 8000
     middle = slice(40, 760)  # away from the crossfades
@@ -121,3 +122,78 @@ def test_analyze_bad_input_too(tmp_path):
 def test_condition_and_explicit_counts_conflict(tmp_path):
     result = run_cli("tactile", EXAMPLE, "--condition", "A", "--top", "7", "-o", tmp_path / "x.wav")
     assert_clean_failure(result, "--top")
+
+
+def good_recording(tmp_path):
+    rec = tmp_path / "rec.wav"
+    sf.write(rec, sines([100, 230], [1, 0.5], 1344, 3.0, noise=0.01), 1344, subtype="FLOAT")
+    return rec
+
+
+MORE_CASES = {
+    "cap_nan": (["--cap-db", "nan"], "--cap-db"),
+    "cap_negative": (["--cap-db", "-10"], "--cap-db"),
+    "actuator_inf": (["--actuator", "lra:f0=inf"], "f0"),
+    "actuator_overflow": (["--actuator", "lra:q=1e400"], "q"),
+    "unit_nan": (["--unit-ms", "nan"], "--unit-ms"),
+    "unit_negative": (["--unit-ms", "-100"], "--unit-ms"),
+    "crossfade_nan": (["--crossfade-ms", "nan"], "--crossfade-ms"),
+    "highpass_nan": (["--highpass", "nan"], "--highpass"),
+    "analysis_rate_zero": (["--analysis-rate", "0"], "--analysis-rate"),
+    "seed_negative": (["--seed", "-1"], "--seed"),
+    "top_not_a_number": (["--top", "abc"], "--top"),
+}
+
+
+@pytest.mark.parametrize("case", list(MORE_CASES))
+def test_bad_options_one_line_exit_2_nothing_written(tmp_path, case):
+    options, names = MORE_CASES[case]
+    rec = good_recording(tmp_path)
+    result = run_cli("tactile", rec, *options, "-o", tmp_path / "out.wav", "--json", tmp_path / "out.json")
+    assert_clean_failure(result, names)
+    assert not (tmp_path / "out.wav").exists() and not (tmp_path / "out.json").exists()
+
+
+def test_unwritable_json_leaves_no_wav(tmp_path):
+    rec = good_recording(tmp_path)
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file where a folder should be")
+    result = run_cli("tactile", rec, "-o", tmp_path / "out.wav", "--json", blocker / "out.json")
+    assert_clean_failure(result, "out.json")
+    assert not (tmp_path / "out.wav").exists()
+    result = run_cli("tactile", rec, "-o", tmp_path)
+    assert_clean_failure(result, "is a folder")
+
+
+@pytest.mark.parametrize("case", ["lsb_noise", "npz_rate_text", "npz_rate_zero", "csv_no_header",
+                                  "csv_gap", "npy_renamed"])
+def test_more_bad_recordings(tmp_path, case):
+    rng = np.random.default_rng(0)
+    if case == "lsb_noise":  # a constant with ±1 LSB of 16-bit noise is not vibration
+        rec = tmp_path / "rec.wav"
+        sf.write(rec, 0.5 + rng.integers(-1, 2, 4032) / 32768, 1344, subtype="PCM_16")
+    elif case.startswith("npz"):
+        rec = tmp_path / "rec.npz"
+        rate = "fast" if case == "npz_rate_text" else 0.0
+        np.savez(rec, samples=rng.standard_normal(4032), rate=np.array(rate))
+    elif case == "npy_renamed":
+        rec = tmp_path / "rec.npz"
+        with open(rec, "wb") as handle:
+            np.save(handle, rng.standard_normal(4032))
+    else:
+        rec = tmp_path / "rec.csv"
+        t = np.arange(4032) / 1344
+        if case == "csv_gap":
+            t[2000:] += 1.0
+        body = "\n".join(f"{a:.6f},{b:.6f}" for a, b in zip(t, rng.standard_normal(4032)))
+        rec.write_text(body if case == "csv_no_header" else "t,x\n" + body)
+    result = run_cli("tactile", rec, "--input-rate", "1344", "-o", tmp_path / "out.wav")
+    assert_clean_failure(result, rec.name)
+    assert not (tmp_path / "out.wav").exists()
+
+
+def test_csv_hint_names_the_right_option(tmp_path):
+    rec = tmp_path / "rec.csv"
+    rec.write_text("ax,ay\n" + "\n".join("1,2" for _ in range(10)))
+    assert_clean_failure(run_cli("tactile", rec, "-o", tmp_path / "o.wav"), "--input-rate")
+    assert_clean_failure(run_cli("analyze", rec), "--rate")

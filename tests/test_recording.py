@@ -148,3 +148,28 @@ def test_resample_polyphase_keeps_a_tone():
     spectrum = np.abs(np.fft.rfft(out.mono * np.hanning(len(out.mono))))
     peak = np.fft.rfftfreq(len(out.mono), 1 / out.rate)[spectrum.argmax()]
     assert peak == pytest.approx(100, abs=1)
+
+
+def test_time_column_variants_and_jitter(tmp_path):
+    rng = np.random.default_rng(2)
+    t = np.arange(2000) / RATE
+    jittered = t + rng.uniform(-0.2, 0.2, len(t)) / RATE  # ±20 % of a step, still increasing
+    x = sines([120], [1.0], RATE, 2000 / RATE, phases=[0])
+    path = tmp_path / "rec.csv"
+    path.write_text("Time (s),acc_x\n" + "\n".join(f"{a:.9f},{np.sin(2 * np.pi * 120 * a):.9f}"
+                                                     for a in jittered))
+    rec = load_recording(path)
+    assert rec.axes == ("acc_x",)
+    assert rec.rate == pytest.approx(RATE, rel=0.01)
+    # Interpolated onto an even grid: the tone comes back where it belongs.
+    grid = jittered[0] + np.arange(len(rec.mono)) / rec.rate
+    assert np.max(np.abs(rec.mono - np.sin(2 * np.pi * 120 * grid))) < 0.05
+    assert len(x) >= len(rec.mono) - 2
+
+
+def test_axis_letters_fall_back_to_column_order():
+    x = sines([80], [1], RATE, 1.0)
+    rec = Recording(np.column_stack([x, 2 * x, 3 * x]), RATE, ("ax", "ay", "az"))
+    assert np.allclose(combine_axes(rec, "z").mono, 3 * x)
+    with pytest.raises(RealPenError, match="no axis 'w'"):
+        combine_axes(rec, "w")

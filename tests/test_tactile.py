@@ -147,3 +147,42 @@ def test_random_phases_keep_crest_factor_low(example):
 def test_output_rate_too_low(tones_recording):
     with pytest.raises(RealPenError, match="--rate"):
         build_pattern(tones_recording, parse_actuator("flat"), TactileParams(rate=800))
+
+
+def test_persistent_tones_do_not_dip_at_crossfades():
+    # Two steady tones (and a little noise) persist through every unit: their amplitudes in
+    # the pattern must stay steady across every boundary and the loop wrap.
+    x = sines([150, 260], [1.0, 0.6], RATE, 4.0, noise=0.01, seed=3)
+    pattern = build_pattern(Recording(x, RATE, ("z",), source="two tones"), parse_actuator("flat"),
+                            TactileParams())
+    tracked = {}
+    for target in (150, 260):
+        found = [c for sub in pattern.subpatterns for c in sub if abs(c.frequency_hz - target) < 3]
+        assert len(found) == 15 and all(c.joins_previous and c.joins_next for c in found)
+        tracked[target] = np.mean([c.frequency_hz for c in found])
+    looped = np.concatenate([pattern.samples, pattern.samples[:800]])
+    half = 40  # a 10 ms window around each point
+    at = lambda centre: fit_amplitudes(looped[centre - half:centre + half], 8000,  # noqa: E731
+                                       list(tracked.values()))
+    boundaries = np.array([at(b) for b in np.arange(1, 16) * 800])  # the last is the wrap
+    middles = np.array([at(b) for b in np.arange(15) * 800 + 400])
+    assert np.all(boundaries > 0.9 * middles.min(axis=0)), boundaries / middles.mean(axis=0)
+
+
+def test_hard_boundaries_can_dip():
+    # The literal method redraws phases per sub-pattern: the same check finds jumps there.
+    x = sines([150, 260], [1.0, 0.6], RATE, 4.0, noise=0.01, seed=3)
+    pattern = build_pattern(Recording(x, RATE, ("z",)), parse_actuator("flat"),
+                            TactileParams(boundary="hard"))
+    phases = [next(c.phase for c in sub if abs(c.frequency_hz - 150) < 3) for sub in pattern.subpatterns]
+    assert np.std(np.diff(phases)) > 0.5
+
+
+def test_single_pattern_tracks_close_on_whole_cycles(example):
+    pattern = build_pattern(example, parse_actuator("flat"), TactileParams.for_condition("E"))
+    for component in pattern.subpatterns[0]:
+        cycles = component.frequency_hz * 1.5
+        assert abs(cycles - round(cycles)) < 1e-6
+    # With whole cycles the loop is continuous without any crossfade at the wrap.
+    x = pattern.samples
+    assert abs(x[0] - x[-1]) <= np.max(np.abs(np.diff(x)))

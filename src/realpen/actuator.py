@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RealPenError, fail
+from .fileio import sha256_of
 
 MODEL_DEFAULTS = {"lra": {"f0": 175.0, "q": 8.0}, "piezo": {"f0": 300.0, "q": 2.0}, "flat": {}}
 
@@ -67,6 +68,7 @@ class Actuator:
         """A JSON-ready description (the measured table included)."""
         data = {"spec": self.spec, "kind": self.kind, "params": self.params}
         if self.kind == "measured":
+            data["params"] = {"sha256": sha256_of(self.spec)} if Path(self.spec).is_file() else {}
             data["table_hz"] = self.table_hz.tolist()
             data["table_response"] = self.table_response.tolist()
         return data
@@ -109,8 +111,8 @@ def parse_actuator(spec: str) -> Actuator:
                 params[key] = float(value)
             except ValueError:
                 raise RealPenError(f"--actuator: {key}={value} is not a number") from None
-            if not params[key] > 0:
-                raise RealPenError(f"--actuator: {key} must be positive, got {value}")
+            if not (np.isfinite(params[key]) and params[key] > 0):
+                raise RealPenError(f"--actuator: {key} must be a positive finite number, got {value}")
         canonical = name + (":" + ",".join(f"{k}={v:g}" for k, v in params.items()) if params else "")
         return Actuator(canonical, name, params)
     path = Path(spec)
@@ -125,12 +127,21 @@ def load_measured(path: str | Path) -> Actuator:
     path = Path(path)
     if not path.exists():
         raise fail(path, "no such file")
+    if path.is_dir():
+        raise fail(path, "is a folder, not a CSV file")
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise fail(path, "not a text CSV file") from None
-    rows = [row for row in csv.reader(io.StringIO(text.replace(";", ",").replace("\t", ",")))
-            if any(cell.strip() for cell in row)]
+    lines = [line for line in text.splitlines() if line.strip()]
+    try:
+        # Sniffed, not guessed: "50;0,1" is a decimal comma, not three columns.
+        dialect = csv.Sniffer().sniff("\n".join(lines[:20]), delimiters=",;\t")
+    except csv.Error:
+        dialect = csv.excel
+    rows = list(csv.reader(io.StringIO("\n".join(lines)), dialect))
+    if dialect.delimiter != ",":
+        rows = [[cell.replace(",", ".") for cell in row] for row in rows]
     if not rows:
         raise fail(path, "file is empty")
     in_db = False

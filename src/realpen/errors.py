@@ -12,3 +12,20 @@ class RealPenError(Exception):
 def fail(source: object, problem: str) -> RealPenError:
     """Build a :class:`RealPenError` that reads ``"<source>: <problem>"``."""
     return RealPenError(f"{source}: {problem}")
+
+
+def require_number(option: str, value: float, minimum: float | None = None,
+                   maximum: float | None = None, inclusive: bool = True) -> None:
+    """Raise a one-line :class:`RealPenError` unless ``value`` is finite and within bounds.
+
+    ``minimum`` is inclusive unless ``inclusive`` is false; ``maximum`` is always inclusive.
+    """
+    import math
+
+    if not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise RealPenError(f"{option} must be a finite number, got {value}")
+    if minimum is not None and (value < minimum or (not inclusive and value == minimum)):
+        relation = ">=" if inclusive else ">"
+        raise RealPenError(f"{option} must be {relation} {minimum:g}, got {value:g}")
+    if maximum is not None and value > maximum:
+        raise RealPenError(f"{option} must be <= {maximum:g}, got {value:g}")

@@ -18,6 +18,8 @@ import numpy as np
 import soundfile as sf
 from scipy.io import wavfile
 
+from .errors import fail
+
 
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
@@ -27,18 +29,33 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     works. On any exception the temporary file is removed and the target is left untouched.
     """
     target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}",
-                                    dir=target.parent)
+    if target.is_dir():
+        raise fail(target, "is a folder; give a file name to write")
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}",
+                                        dir=target.parent)
+    except OSError as error:
+        raise fail(target, f"cannot write here ({error.strerror or error})") from None
     os.close(fd)
     tmp = Path(tmp_name)
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs are ordinary files
         os.replace(tmp, target)
+    except OSError as error:
+        raise fail(target, f"cannot write ({error.strerror or error})") from None
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+def json_text(data: object, source: object = "JSON") -> str:
+    """Indented JSON text of ``data``; NaN or infinity becomes a one-line error, not bad JSON."""
+    try:
+        return json.dumps(data, indent=2, allow_nan=False) + "\n"
+    except ValueError:
+        raise fail(source, "result holds NaN or infinite numbers; check the parameters") from None
 
 
 def current_umask() -> int:
@@ -48,10 +65,25 @@ def current_umask() -> int:
     return mask
 
 
+def write_files(files: dict[str | os.PathLike, bytes]) -> None:
+    """Write several outputs all-or-nothing: every file is staged first, then all are renamed.
+
+    If any file cannot be staged, none of the targets is touched.
+    """
+    with contextlib.ExitStack() as stack:
+        staged = [(stack.enter_context(atomic_path(target)), data) for target, data in files.items()]
+        for tmp, data in staged:
+            try:
+                tmp.write_bytes(data)
+            except OSError as error:
+                raise fail(tmp, f"cannot write ({error.strerror or error})") from None
+
+
 def write_json(target: str | os.PathLike, data: object) -> None:
     """Write ``data`` as indented UTF-8 JSON to ``target`` atomically."""
+    text = json_text(data, target)
     with atomic_path(target) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        tmp.write_text(text, encoding="utf-8")
 
 
 def wav_bytes(samples: np.ndarray, rate: int) -> bytes:

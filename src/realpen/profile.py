@@ -51,7 +51,11 @@ class _Strict(BaseModel):
 
 
 class ComponentEntry(_Strict):
-    """One sinusoid: frequency (Hz), amplitude (full scale), phase (rad), and its origin."""
+    """One sinusoid: frequency (Hz), amplitude (full scale), phase (rad), and its origin.
+
+    ``joins_previous`` / ``joins_next``: the component continues a track across that boundary
+    (continuous phase), so the crossfade there is linear rather than equal-power.
+    """
 
     frequency_hz: float = Field(gt=0)
     amplitude: float = Field(ge=0)
@@ -59,6 +63,8 @@ class ComponentEntry(_Strict):
     power: float | None = None
     weight: float | None = None
     clipped: bool = False
+    joins_previous: bool = False
+    joins_next: bool = False
 
 
 class TactileSection(_Strict):

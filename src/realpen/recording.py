@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import re
 import struct
 import zipfile
 from dataclasses import dataclass, field, replace
@@ -20,8 +21,9 @@ import numpy as np
 import soundfile as sf
 from scipy import fft as sp_fft
 from scipy import signal
+from scipy.interpolate import CubicSpline
 
-from .errors import RealPenError, fail
+from .errors import RealPenError, fail, require_number
 from .fileio import atomic_path, sha256_of
 
 TIME_COLUMNS = ("t", "time", "timestamp")
@@ -93,7 +95,7 @@ def check_readable_file(path: Path) -> None:
 
 
 def load_recording(path: str | os.PathLike, rate: float | None = None,
-                   units: str | None = None) -> Recording:
+                   units: str | None = None, rate_option: str = "--rate") -> Recording:
     """Load a vibration recording from WAV/FLAC/OGG, CSV or NPZ.
 
     Args:
@@ -102,6 +104,7 @@ def load_recording(path: str | os.PathLike, rate: float | None = None,
         rate: sampling rate in Hz for a CSV with no time column (ignored otherwise unless the
             file carries no rate at all).
         units: override the unit of the samples.
+        rate_option: how the caller's command line names ``rate``, for messages.
 
     Returns:
         A :class:`Recording` with ``source`` and ``sha256`` set.
@@ -112,15 +115,19 @@ def load_recording(path: str | os.PathLike, rate: float | None = None,
     """
     path = Path(path)
     check_readable_file(path)
+    if rate is not None:
+        require_number(rate_option, rate, minimum=0.0, inclusive=False)
     suffix = path.suffix.lower()
     if suffix == ".csv":
-        recording = _load_csv(path, rate)
+        recording = _load_csv(path, rate, rate_option)
     elif suffix == ".npz":
-        recording = _load_npz(path, rate)
+        recording = _load_npz(path, rate, rate_option)
     else:
         recording = _load_audio(path)
     if recording.samples.shape[0] == 0:
         raise fail(path, "holds no samples")
+    if not (np.isfinite(recording.rate) and recording.rate > 0):
+        raise fail(path, f"sampling rate must be a positive number, got {recording.rate}")
     _check_finite(recording.samples, str(path))
     return replace(recording, source=str(path), sha256=sha256_of(path),
                    units=units or recording.units)
@@ -167,66 +174,117 @@ def _wav_missing_bytes(path: Path) -> int:
             handle.seek(length + (length & 1), os.SEEK_CUR)
 
 
-def _load_csv(path: Path, rate: float | None) -> Recording:
+TIME_PATTERN = re.compile(r"^(t|time|timestamp)([^a-z0-9].*)?$", re.IGNORECASE)
+JITTER_TOLERANCE = 0.01  # steps within 1 % of the median count as even sampling
+GAP_FACTOR = 2.0  # a step this many times the median is a gap: samples are missing
+
+
+def _load_csv(path: Path, rate: float | None, rate_option: str = "--rate") -> Recording:
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise fail(path, "not a text CSV file") from None
-    lines = [line for line in text.splitlines() if line.strip()]
+    lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
+             if line.strip()]
     if len(lines) < 2:
         raise fail(path, "CSV needs a header row and at least one row of values")
     try:
-        dialect = csv.Sniffer().sniff("\n".join(lines[:20]), delimiters=",;\t ")
+        dialect = csv.Sniffer().sniff("\n".join(line for _, line in lines[:20]),
+                                      delimiters=",;\t ")
     except csv.Error:
         dialect = csv.excel
-    rows = list(csv.reader(io.StringIO("\n".join(lines)), dialect))
+    rows = list(csv.reader(io.StringIO("\n".join(line for _, line in lines)), dialect))
     header = [name.strip() for name in rows[0]]
-    try:
-        values = np.array([[float(cell) for cell in row] for row in rows[1:]], dtype=np.float64)
-    except ValueError as error:
-        raise fail(path, f"CSV has a non-numeric value ({error})") from None
-    if values.ndim != 2 or values.shape[1] != len(header):
-        raise fail(path, f"CSV rows do not all have the {len(header)} columns of the header")
-    lowered = [name.lower() for name in header]
-    time_index = next((lowered.index(name) for name in TIME_COLUMNS if name in lowered), None)
+    if all(_is_number(name) for name in header):
+        raise fail(path, "CSV needs a header row naming its columns (the first row is numbers)")
+    values = []
+    for (number, _), row in zip(lines[1:], rows[1:]):
+        if len(row) != len(header):
+            raise fail(path, f"line {number} has {len(row)} columns; the header has {len(header)}")
+        try:
+            values.append([float(cell) for cell in row])
+        except ValueError:
+            raise fail(path, f"line {number} has a value that is not a number") from None
+    values = np.array(values, dtype=np.float64)
+    time_index = next((i for i, name in enumerate(header) if TIME_PATTERN.match(name)), None)
     if time_index is not None:
         times = values[:, time_index]
-        steps = np.diff(times)
-        if len(steps) == 0 or not np.all(steps > 0):
-            raise fail(path, f"time column '{header[time_index]}' is not strictly increasing")
-        rate = 1.0 / float(np.median(steps))
         values = np.delete(values, time_index, axis=1)
-        header = header[:time_index] + header[time_index + 1:]
+        time_name = header.pop(time_index)
+        rate, values = _even_sampling(path, time_name, times, values)
     elif rate is None:
-        raise fail(path, "CSV has no time column (t, time or timestamp); give the rate with --rate")
+        raise fail(path, f"CSV has no time column (t, time or timestamp); give its sampling rate "
+                         f"with {rate_option}")
     if values.shape[1] == 0:
         raise fail(path, "CSV has no signal columns")
-    if rate <= 0:
-        raise fail(path, f"rate must be positive, got {rate}")
     return Recording(values, float(rate), tuple(header))
 
 
-def _load_npz(path: Path, rate: float | None) -> Recording:
+def _even_sampling(path: Path, name: str, times: np.ndarray, values: np.ndarray
+                   ) -> tuple[float, np.ndarray]:
+    """Rate from a time column (s); jittered timestamps are interpolated onto an even grid.
+
+    The interpolation is a cubic spline, which keeps tones up to a third of the rate within a
+    few per cent; larger gaps than ``GAP_FACTOR`` steps are refused rather than invented.
+    """
+    steps = np.diff(times)
+    if len(steps) == 0 or not np.all(steps > 0):
+        raise fail(path, f"time column '{name}' is not strictly increasing")
+    step = float(np.median(steps))
+    widest = int(np.argmax(steps))
+    if steps[widest] > GAP_FACTOR * step:
+        raise fail(path, f"time column '{name}' has a gap of {steps[widest]:.4g} s after "
+                         f"{times[widest]:.4g} s (samples are {step:.4g} s apart); analyse the "
+                         f"parts on either side separately")
+    if np.max(np.abs(steps - step)) <= JITTER_TOLERANCE * step:
+        return 1.0 / step, values
+    grid = times[0] + np.arange(int(np.floor((times[-1] - times[0]) / step)) + 1) * step
+    return 1.0 / step, CubicSpline(times, values, axis=0)(grid)
+
+
+def _is_number(text: str) -> bool:
     try:
-        with np.load(path, allow_pickle=False) as archive:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _load_npz(path: Path, rate: float | None, rate_option: str = "--rate") -> Recording:
+    try:
+        archive = np.load(path, allow_pickle=False)
+        if not hasattr(archive, "files"):
+            raise fail(path, "is a single .npy array, not an NPZ archive")
+        with archive:
             contents = {key: archive[key] for key in archive.files}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
         raise fail(path, f"not a readable NPZ archive ({error})") from None
     key = next((k for k in ("samples", "data", "acc", "acceleration") if k in contents), None)
     if key is None:
         raise fail(path, "NPZ has no 'samples' array")
-    samples = np.asarray(contents[key], dtype=np.float64)
+    samples = contents[key]
+    if samples.dtype.kind not in "iuf":
+        raise fail(path, f"'{key}' must hold real numbers, not {samples.dtype}")
+    samples = samples.astype(np.float64)
     if samples.ndim == 1:
         samples = samples[:, None]
     if samples.ndim != 2:
-        raise fail(path, f"'samples' must be 1-D or 2-D, got shape {samples.shape}")
+        raise fail(path, f"'{key}' must be 1-D or 2-D, got shape {samples.shape}")
     if "rate" in contents:
-        rate = float(contents["rate"])
+        stored = contents["rate"]
+        if stored.size != 1 or stored.dtype.kind not in "iuf":
+            raise fail(path, "'rate' must be one number in Hz")
+        rate = float(stored.reshape(()))
     elif rate is None:
-        raise fail(path, "NPZ has no 'rate'; give the rate with --rate")
-    axes = tuple(str(a) for a in contents["axes"]) if "axes" in contents else (
-        ("x", "y", "z")[:samples.shape[1]] if samples.shape[1] <= 3
-        else tuple(f"ch{i}" for i in range(samples.shape[1])))
+        raise fail(path, f"NPZ has no 'rate'; give its sampling rate with {rate_option}")
+    if "axes" in contents:
+        names = np.atleast_1d(contents["axes"])
+        if names.dtype.kind not in "US" or names.ndim != 1:
+            raise fail(path, "'axes' must be an array of axis names")
+        axes = tuple(str(a) for a in names)
+    else:
+        axes = ("x", "y", "z")[:samples.shape[1]] if samples.shape[1] <= 3 else tuple(
+            f"ch{i}" for i in range(samples.shape[1]))
     if len(axes) != samples.shape[1]:
         raise fail(path, f"NPZ names {len(axes)} axes for {samples.shape[1]} columns")
     units = str(contents["units"]) if "units" in contents else "arbitrary"
@@ -271,7 +329,8 @@ def combine_axes(recording: Recording, axis: str | None = None) -> Recording:
 
     Args:
         axis: ``"dft321"`` (default for more than one axis), ``"magnitude"`` (Euclidean norm
-            per frame, mean removed), or an axis name (``"x"``, ``"y"``, ``"z"``...).
+            per frame, mean removed), or an axis name; ``"x"``, ``"y"``, ``"z"`` also pick the
+            first, second and third column when no column has that name.
     """
     count = recording.samples.shape[1]
     if axis is None:
@@ -283,6 +342,9 @@ def combine_axes(recording: Recording, axis: str | None = None) -> Recording:
         combined = combined - combined.mean()
     elif axis in recording.axes:
         combined = recording.samples[:, recording.axes.index(axis)]
+    elif axis in ("x", "y", "z") and "xyz".index(axis) < count:
+        # Columns named otherwise (ax, acc_y, ...) are taken in order: x first, then y, z.
+        combined = recording.samples[:, "xyz".index(axis)]
     else:
         raise fail(recording.source, f"no axis '{axis}' (axes: {', '.join(recording.axes)}; "
                                      f"or dft321, magnitude)")
@@ -290,10 +352,18 @@ def combine_axes(recording: Recording, axis: str | None = None) -> Recording:
 
 
 def resample(recording: Recording, rate: float) -> Recording:
-    """Resample to ``rate`` Hz with a polyphase filter (scipy.signal.resample_poly)."""
+    """Resample to ``rate`` Hz with a polyphase filter (scipy.signal.resample_poly).
+
+    The ratio is approximated to a fraction with a denominator ≤ 1000; the exact rate reached is
+    the returned recording's ``rate``.
+    """
+    require_number("--analysis-rate", rate, minimum=0.0, inclusive=False)
     if abs(rate - recording.rate) < 1e-9:
         return recording
     ratio = Fraction(rate / recording.rate).limit_denominator(1000)
+    if ratio.numerator == 0:
+        raise RealPenError(f"--analysis-rate: {rate:g} Hz is too low to resample "
+                           f"{recording.rate:g} Hz to")
     out = signal.resample_poly(recording.samples, ratio.numerator, ratio.denominator, axis=0)
     actual = recording.rate * ratio.numerator / ratio.denominator
     return recording.with_samples(out, f"resample:{actual:g}Hz", rate=actual)
@@ -305,8 +375,9 @@ def highpass(recording: Recording, cutoff_hz: float = 30.0, order: int = 4) -> R
     Raises:
         RealPenError: when the rate is too low for the cutoff (Nyquist at or below it).
     """
+    require_number("--highpass", cutoff_hz, minimum=0.0)
     nyquist = recording.rate / 2
-    if cutoff_hz <= 0:
+    if cutoff_hz == 0:
         return recording
     if cutoff_hz >= nyquist:
         raise fail(recording.source, f"rate {recording.rate:g} Hz is too low for a "
@@ -319,10 +390,34 @@ def highpass(recording: Recording, cutoff_hz: float = 30.0, order: int = 4) -> R
 
 def prepare(recording: Recording, axis: str | None = None, rate: float | None = None,
             highpass_hz: float = 30.0) -> Recording:
-    """The method's preprocessing: axes to one, optional resampling, zero-phase high-pass."""
+    """The method's preprocessing: axes to one, optional resampling, zero-phase high-pass.
+
+    Args:
+        axis: see :func:`combine_axes` (None: DFT321 for several axes).
+        rate: analysis rate in Hz (None: keep the recording's rate).
+        highpass_hz: high-pass cutoff in Hz (0: none).
+    """
     if axis is not None and axis not in AXIS_CHOICES and axis not in recording.axes:
         raise RealPenError(f"--axis: unknown axis '{axis}' (choose from {', '.join(AXIS_CHOICES)})")
     one = combine_axes(recording, axis)
     if rate is not None:
         one = resample(one, rate)
-    return highpass(one, highpass_hz)
+    filtered = highpass(one, highpass_hz)
+    _check_not_silent(recording, filtered)
+    return filtered
+
+
+SILENCE_DB = -80.0  # vibration this far below the input's peak (offset included) is no signal
+
+
+def _check_not_silent(raw: Recording, filtered: Recording) -> None:
+    """Refuse input whose filtered part is silence: zeros, a constant, or quantisation noise.
+
+    Judged relative to the input's own peak, so an accelerometer's gravity offset does not
+    hide a silent pen, and ±1 LSB of noise on a constant is not mistaken for vibration.
+    """
+    peak = float(np.max(np.abs(raw.samples)))
+    level = float(np.sqrt(np.mean(filtered.samples ** 2)))
+    if peak == 0 or level <= peak * 10 ** (SILENCE_DB / 20):
+        raise fail(raw.source, "signal is silent or constant (no vibration above "
+                               f"{SILENCE_DB:g} dB of its peak after the high-pass)")

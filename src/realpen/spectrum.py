@@ -16,7 +16,7 @@ import numpy as np
 from scipy import signal
 from scipy.ndimage import maximum_filter1d
 
-from .errors import RealPenError
+from .errors import RealPenError, require_number
 
 ProgressCallback = Callable[[int, int], None]
 SELECTIONS = ("stationary", "middle")
@@ -37,7 +37,8 @@ class Analysis:
         frequencies_hz: shape (units, top), strongest first; NaN where a unit has fewer peaks.
         powers: mean-square power of each peak (signal unit squared), same shape; NaN likewise.
             A sinusoid of amplitude A has power A²/2.
-        band_levels_db: coarse band levels per unit (units, bands), used to judge stationarity.
+        band_levels_db: levels of 24 equal-width bands between fmin and fmax per unit, in dB re
+            1 (recording unit)², shape (units, 24); used to judge stationarity.
         selected: indices of the units chosen for the pattern, consecutive.
         selection: ``"stationary"`` or ``"middle"``.
     """
@@ -65,7 +66,10 @@ class Analysis:
             units.append({"start_s": round(float(start), 6),
                           "frequencies_hz": [round(float(f), 4) for f in freqs],
                           "powers": [float(p) for p in powers]})
-        return {"rate": self.rate, "unit_ms": self.unit_ms, "top": self.top,
+        unit_samples = int(round(self.unit_ms * self.rate / 1000.0))
+        # Units are whole samples: 100 ms at 1344 Hz is 134 samples (99.70 ms).
+        return {"rate": self.rate, "unit_ms": self.unit_ms, "unit_samples": unit_samples,
+                "unit_s_exact": unit_samples / self.rate, "top": self.top,
                 "selection": self.selection, "units": units,
                 "selected": [int(i) for i in self.selected]}
 
@@ -78,7 +82,7 @@ def fft_size(unit_samples: int) -> int:
 def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10,
                           fmin: float = 30.0, fmax: float | None = None,
                           min_separation_hz: float | None = None,
-                          progress: ProgressCallback | None = None
+                          progress: ProgressCallback | None = None, source: str = "signal"
                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Top-N spectral peaks of every unit sequence of a one-axis signal.
 
@@ -91,14 +95,15 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
         min_separation_hz: two peaks closer than this are one peak (default: one bin of the
             unwindowed unit, 1000 / unit_ms Hz).
         progress: called as ``progress(units_done, units_total)``.
+        source: names the signal in error messages.
 
     Returns:
         ``(starts_s, frequencies_hz, powers, band_levels_db)`` as described in :class:`Analysis`.
     """
     unit_samples = int(round(unit_ms * rate / 1000.0))
     if unit_samples < 8:
-        raise RealPenError(f"--unit-ms: {unit_ms:g} ms is only {unit_samples} samples at "
-                           f"{rate:g} Hz; use longer units")
+        raise RealPenError(f"{source}: {unit_ms:g} ms units are only {unit_samples} samples at "
+                           f"{rate:g} Hz; record faster or use longer units (--unit-ms)")
     count = len(x) // unit_samples
     nyquist = rate / 2
     fmax = nyquist if fmax is None else min(fmax, nyquist)
@@ -212,14 +217,28 @@ def analyze(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10, c
 
     ``x`` should already be one axis and high-passed (see :func:`realpen.recording.prepare`).
 
+    Args:
+        x: signal, shape (frames,), in the recording's unit.
+        rate: its sampling rate in Hz.
+        unit_ms: unit sequence length in ms.
+        top: principal frequencies kept per unit.
+        count: consecutive units to select (the first and last unit are never selected).
+        selection: ``"stationary"`` or ``"middle"``.
+        fmin, fmax: band in Hz where peaks count (fmax: Nyquist when None).
+        min_separation_hz: see :func:`principal_frequencies`.
+        source: names the signal in error messages.
+        progress: called as ``progress(units_done, units_total)``.
+
     Raises:
         RealPenError: a silent or constant signal (no peaks), or a signal too short for
             ``count + 2`` units.
     """
-    if top < 1:
-        raise RealPenError(f"--top must be at least 1, got {top}")
-    if count < 1:
-        raise RealPenError(f"--subpatterns must be at least 1, got {count}")
+    require_number("--unit-ms", unit_ms, minimum=0.0, inclusive=False)
+    require_number("--top", top, minimum=1)
+    require_number("--subpatterns", count, minimum=1)
+    if selection not in SELECTIONS:
+        raise RealPenError(f"--select: unknown selection '{selection}' "
+                           f"(choose from {', '.join(SELECTIONS)})")
     if not np.any(np.abs(x) > 1e-12 * max(1.0, float(np.max(np.abs(x), initial=0.0)))):
         raise RealPenError(f"{source}: signal is silent or constant (no spectral peaks)")
     unit_samples = int(round(unit_ms * rate / 1000.0))
@@ -229,7 +248,7 @@ def analyze(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10, c
             f"{source}: too short: {len(x) / rate:.3f} s holds {units} units of {unit_ms:g} ms; "
             f"{count} units plus the dropped first and last need {(count + 2) * unit_ms / 1000:g} s")
     starts, freqs, powers, bands = principal_frequencies(
-        x, rate, unit_ms, top, fmin, fmax, min_separation_hz, progress)
+        x, rate, unit_ms, top, fmin, fmax, min_separation_hz, progress, source)
     selected = select_units(bands, count, selection)
     if not np.isfinite(freqs[selected]).any():
         raise RealPenError(f"{source}: no spectral peaks between {fmin:g} Hz and "

@@ -11,6 +11,11 @@ import sys
 
 import typer
 
+try:  # recent typer releases carry their own copy of click
+    from typer._click import exceptions as click_errors
+except ImportError:  # older typer uses click itself
+    from click import exceptions as click_errors
+
 from ..errors import RealPenError
 
 app = typer.Typer(
@@ -23,15 +28,26 @@ app = typer.Typer(
 
 
 def main() -> None:
-    """Entry point of the ``realpen`` console script."""
+    """Entry point of the ``realpen`` console script: every failure is one line on stderr."""
     try:
-        app(prog_name="realpen")
+        code = app(prog_name="realpen", standalone_mode=False)
     except RealPenError as error:
-        print(f"realpen: error: {error}", file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        print("realpen: interrupted", file=sys.stderr)
-        sys.exit(130)
+        _fail(str(error), 2)
+    except click_errors.NoArgsIsHelpError:
+        sys.exit(0)  # the help was printed while the error was made
+    except click_errors.UsageError as error:
+        where = error.ctx.command_path if error.ctx else "realpen"
+        _fail(f"{where}: {error.format_message()} (see {where} --help)", 2)
+    except click_errors.ClickException as error:
+        _fail(error.format_message(), error.exit_code)
+    except (KeyboardInterrupt, typer.Abort):
+        _fail("interrupted", 130)
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+def _fail(message: str, code: int) -> None:
+    print(f"realpen: error: {' '.join(message.split())}", file=sys.stderr)
+    sys.exit(code)
 
 
 # Subcommand modules register themselves on `app` when imported.

@@ -20,7 +20,7 @@ def progress_bar(label: str, enabled: bool = True) -> Iterator:
 
     With ``enabled`` false the callback does nothing (short jobs need no bar).
     """
-    if not enabled:
+    if not enabled or not err_console.is_terminal:  # a bar is for people, not for logs
         yield None
         return
     columns = (TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(),

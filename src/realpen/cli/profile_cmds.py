@@ -56,7 +56,7 @@ def build(
                                    analysis_rate=analysis_rate)
     response = parse_actuator(actuator)
     constants = Coupling.load(coupling) if coupling is not None else Coupling()
-    shake = load_recording(vibration, rate=input_rate)
+    shake = load_recording(vibration, rate=input_rate, rate_option="--input-rate")
     noise = load_sound(sound)
     with progress_bar("building", shake.duration > PROGRESS_AFTER_S) as progress:
         profile = build_profile(name, tool, shake, noise, response, params, sound_unit_ms,

@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from ..actuator import parse_actuator
-from ..fileio import write_json, write_wav
+from ..fileio import json_text, wav_bytes, write_files, write_json
 from ..recording import load_recording, prepare
 from ..spectrum import analyze as analyze_signal
 from ..tactile import CONDITIONS, TactileParams, build_pattern
@@ -95,12 +95,13 @@ def tactile(
                             cap_db=cap_db, selection=select, highpass_hz=highpass_hz, axis=axis,
                             analysis_rate=analysis_rate)
     response = parse_actuator(actuator)
-    loaded = load_recording(recording, rate=input_rate)
+    loaded = load_recording(recording, rate=input_rate, rate_option="--input-rate")
     with progress_bar("analysing", loaded.duration > PROGRESS_AFTER_S) as progress:
         pattern = build_pattern(loaded, response, params, progress)
-    write_wav(output, pattern.samples, pattern.rate)
+    outputs = {output: wav_bytes(pattern.samples, pattern.rate)}
     if json_out is not None:
-        write_json(json_out, pattern.to_json())
+        outputs[json_out] = json_text(pattern.to_json(), json_out).encode("utf-8")
+    write_files(outputs)
     counts = [len(sub) for sub in pattern.subpatterns]
     console.print(f"wrote {output}: {pattern.duration_s * 1000:.0f} ms at {pattern.rate} Hz, "
                   f"{len(counts)} sub-pattern(s) × {max(counts)} components, {params.boundary} "

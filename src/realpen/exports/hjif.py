@@ -3,7 +3,7 @@
 Unlike the envelope formats, ``.hjif`` carries the superposition itself: every component of
 every sub-pattern becomes a ``Basis`` effect with ``base_signal`` ``"Sine"`` in one
 ``VectorialWave`` band, positioned where its sub-pattern starts and shaped by amplitude
-keyframes that reproduce the crossfades between sub-patterns (equal-power ramps approximated by
+keyframes that reproduce the crossfades between sub-patterns (linear or equal-power ramps approximated by
 five linear keyframes). Summing the effects gives back the tactile pattern.
 
 Field names and constraints follow the MPEG reference software (MPEGGroup/
@@ -67,14 +67,21 @@ LIMITS = (
 )
 
 
-def _ramps(start: int, length: int, fade: int, amplitude: float) -> tuple[np.ndarray, np.ndarray]:
-    """Sample times and levels of one component's envelope: fade in, hold, fade out."""
+def _ramps(start: int, length: int, fade: int, component: ComponentEntry
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Sample times and levels of one component's envelope: fade in, hold, fade out.
+
+    As in the synthesis, a side where the component continues a track fades linearly, any
+    other side with the equal-power (sine) ramp.
+    """
+    amplitude = component.amplitude
     if not fade:
         return np.array([start, start + length], dtype=float), np.array([amplitude, amplitude])
-    gain = np.sin(0.5 * np.pi * RAMP)  # the equal-power ramp of the synthesis
+    rise = RAMP if component.joins_previous else np.sin(0.5 * np.pi * RAMP)
+    fall = (RAMP if component.joins_next else np.sin(0.5 * np.pi * RAMP))[::-1]
     times = np.concatenate([start - fade // 2 + fade * RAMP,
                             start + length - fade // 2 + fade * RAMP])
-    return times, amplitude * np.concatenate([gain, gain[::-1]])
+    return times, amplitude * np.concatenate([rise, fall])
 
 
 def _effect(start: int, length: int, fade: int, component: ComponentEntry, first: int,
@@ -84,7 +91,7 @@ def _effect(start: int, length: int, fade: int, component: ComponentEntry, first
 
     ``component`` holds frequency (Hz), amplitude (full scale) and phase (rad) at ``start``.
     """
-    times, levels = _ramps(start, length, fade, component.amplitude)
+    times, levels = _ramps(start, length, fade, component)
     last = stop - 1
     inside = (times > first) & (times < last)
     t = np.concatenate([[first], times[inside], [last]])
