@@ -49,10 +49,20 @@ def test_round_trip_folder_and_zip(built, tmp_path):
 def test_saving_over_an_existing_bundle_replaces_it(built, tmp_path):
     target = tmp_path / "pen"
     save_profile(built, target)
-    (target / "stale.txt").write_text("old")
+    (target / "tactile.wav").write_bytes(b"stale")
     save_profile(built, target)
-    assert sorted(p.name for p in target.iterdir()) == ["profile.json", "sound.wav", "tactile.wav"]
+    same_profile(built, load_profile(target))
     assert [p.name for p in tmp_path.iterdir()] == ["pen"]  # no staging folders left behind
+
+
+def test_a_folder_holding_other_files_is_never_replaced(built, tmp_path):
+    target = tmp_path / "thesis"
+    target.mkdir()
+    (target / "chapter1.txt").write_text("precious")
+    with pytest.raises(RealPenError, match="holding other files"):
+        save_profile(built, target)
+    assert (target / "chapter1.txt").read_text() == "precious"
+    assert sorted(p.name for p in target.iterdir()) == ["chapter1.txt"]
 
 
 def break_bundle(folder: Path, case: str) -> str:
@@ -69,6 +79,22 @@ def break_bundle(folder: Path, case: str) -> str:
         del document["tactile"]["subpatterns"]
         (folder / "profile.json").write_text(json.dumps(document))
         return "tactile.subpatterns"
+    if case == "nan_phase":
+        document["tactile"]["subpatterns"][0][0]["phase"] = float("nan")
+        (folder / "profile.json").write_text(json.dumps(document))
+        return "phase"
+    if case == "empty_subpattern":
+        document["tactile"]["subpatterns"][1] = []
+        (folder / "profile.json").write_text(json.dumps(document))
+        return "subpatterns.1"
+    if case == "lengths_disagree":
+        document["tactile"]["subpatterns"] = document["tactile"]["subpatterns"][:3]
+        (folder / "profile.json").write_text(json.dumps(document))
+        return "are 2400 frames, not 12000"
+    if case == "format_true":
+        document["format"] = True
+        (folder / "profile.json").write_text(json.dumps(document))
+        return "unknown profile format True"
     if case == "not_json":
         (folder / "profile.json").write_text("{not json")
         return "not valid JSON"
@@ -87,7 +113,8 @@ def break_bundle(folder: Path, case: str) -> str:
     raise AssertionError(case)
 
 
-CASES = ["missing_wav", "unknown_format", "schema", "not_json", "other_wav", "wrong_rate"]
+CASES = ["missing_wav", "unknown_format", "schema", "not_json", "other_wav", "wrong_rate",
+         "nan_phase", "empty_subpattern", "lengths_disagree", "format_true"]
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -195,6 +222,25 @@ def test_profile_from_real_recordings(hatt_dir, lmt_dir, tmp_path):
                             parse_actuator("lra:f0=175,q=8"))
     saved = load_profile(save_profile(profile, tmp_path / "real.zip"))
     same_profile(profile, saved)
+    # The exports take it like a bundled pen.
+    from realpen.exports import FORMATS, export_profile
+    for fmt in FORMATS:
+        export_profile(saved, fmt, tmp_path / f"real.{fmt}")
+        assert (tmp_path / f"real.{fmt}").stat().st_size > 100
     assert profile.meta.sound.seam["level_jump_db"] < 1.0
     assert profile.meta.provenance.sources[1].name == "G8RoughPaper_Sound_Movement_train1.wav"
     assert not any(Path(ROOT, "src").rglob("*RoughPaper*"))
+
+
+def test_cli_user_text_is_not_markup_and_plot_type_is_checked(tmp_path):
+    vibration, sound = write_model_recordings("marker", tmp_path)
+    out = tmp_path / "felt"
+    result = run_cli("profile", "build", "--name", "felt", "--tool", "felt [/] tip", "--description",
+                     "see [/b] notes", "--vibration", vibration, "--sound", sound, "-o", out)
+    assert result.returncode == 0, result.stderr
+    shown = run_cli("profile", "show", str(out))
+    assert shown.returncode == 0 and "felt [/] tip" in shown.stdout and "see [/b] notes" in shown.stdout
+    listed = run_cli("profile", "list", "--profiles", tmp_path)
+    assert listed.returncode == 0 and "felt [/] tip" in listed.stdout
+    assert_clean_failure(run_cli("profile", "show", "pencil", "--plot", tmp_path / "p.txt"), "p.txt")
+    assert not (tmp_path / "p.txt").exists()

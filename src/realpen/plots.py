@@ -4,6 +4,7 @@ spectrogram, and the spectrum of the friction-sound unit."""
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import matplotlib
 
@@ -12,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import signal  # noqa: E402
 
+from .errors import fail  # noqa: E402
 from .fileio import atomic_path  # noqa: E402
 from .profile import PenProfile  # noqa: E402
 
@@ -47,7 +49,15 @@ def profile_figure(profile: PenProfile) -> "matplotlib.figure.Figure":
 
 def save_profile_plot(profile: PenProfile, target: str | os.PathLike) -> None:
     """Draw :func:`profile_figure` into a PNG (or any matplotlib format by suffix), atomically."""
+    kind = Path(target).suffix.lower().lstrip(".")
+    supported = plt.gcf().canvas.get_supported_filetypes()
+    plt.close("all")
+    if kind not in supported:
+        raise fail(target, f"unknown image type '.{kind}' (use one of "
+                           f"{', '.join('.' + k for k in sorted(supported))})")
     figure = profile_figure(profile)
-    with atomic_path(target) as tmp:
-        figure.savefig(tmp, dpi=110)
-    plt.close(figure)
+    try:
+        with atomic_path(target) as tmp:
+            figure.savefig(tmp, dpi=110, format=kind)
+    finally:
+        plt.close(figure)

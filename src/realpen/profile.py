@@ -25,11 +25,11 @@ import tempfile
 import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 import soundfile as sf
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from . import __version__
 from .actuator import Actuator
@@ -47,7 +47,7 @@ NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class ComponentEntry(_Strict):
@@ -74,10 +74,19 @@ class TactileSection(_Strict):
     rate: int = Field(gt=0)
     frames: int = Field(gt=0)
     sha256: str
-    subpattern_ms: float = Field(gt=0)
-    boundary: str
+    subpattern_ms: float = Field(gt=0, le=60_000)
+    boundary: Literal["crossfade", "hard"]
     crossfade_ms: float = Field(ge=0)
-    subpatterns: list[list[ComponentEntry]] = Field(min_length=1)
+    subpatterns: list[Annotated[list[ComponentEntry], Field(min_length=1)]] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _lengths_agree(self) -> "TactileSection":
+        per_sub = int(round(self.subpattern_ms * self.rate / 1000.0))
+        if per_sub * len(self.subpatterns) != self.frames:
+            raise ValueError(f"{len(self.subpatterns)} sub-patterns of {self.subpattern_ms:g} ms "
+                             f"at {self.rate} Hz are {per_sub * len(self.subpatterns)} frames, "
+                             f"not {self.frames}")
+        return self
 
 
 class SoundSection(_Strict):
@@ -251,7 +260,8 @@ def build_profile(name: str, tool: str, vibration: Recording, sound: Recording, 
 def save_profile(profile: PenProfile, target: str | os.PathLike) -> Path:
     """Write a bundle atomically: a folder, or a ``.zip`` when ``target`` ends in ``.zip``.
 
-    An existing bundle at ``target`` is replaced only once the new one is complete.
+    An existing bundle at ``target`` is replaced only once the new one is complete; a folder
+    holding anything but a bundle is never replaced.
     """
     target = Path(target)
     files = {PROFILE_JSON: profile.json_bytes(),
@@ -266,8 +276,16 @@ def save_profile(profile: PenProfile, target: str | os.PathLike) -> Path:
                     info.compress_type = zipfile.ZIP_DEFLATED
                     archive.writestr(info, data)
         return target
+    target = target.resolve()
     if target.exists() and not target.is_dir():
         raise fail(target, "exists and is not a folder")
+    if target == Path.cwd().resolve() or target in Path.cwd().resolve().parents:
+        raise fail(target, "is the current folder; give the bundle a folder of its own")
+    if target.is_dir():
+        others = sorted(p.name for p in target.iterdir() if p.name not in BUNDLE_FILES)
+        if others:
+            raise fail(target, f"is a folder holding other files ({', '.join(others[:3])}); "
+                               f"a bundle replaces only a folder that holds a bundle")
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     os.chmod(staging, 0o777 & ~current_umask())  # mkdtemp makes 0700; a bundle is shared
@@ -294,7 +312,10 @@ def _read_bundle_files(path: Path) -> dict[str, bytes]:
         return {name: (path / name).read_bytes() for name in BUNDLE_FILES if (path / name).is_file()}
     try:
         with zipfile.ZipFile(path) as archive:
-            names = {Path(n).name: n for n in archive.namelist() if Path(n).name in BUNDLE_FILES}
+            members = [n for n in archive.namelist() if Path(n).name in BUNDLE_FILES]
+            names = {Path(n).name: n for n in members}
+            if len(names) != len(members):
+                raise fail(path, "holds more than one profile (repeated profile.json or WAVs)")
             return {short: archive.read(full) for short, full in names.items()}
     except (zipfile.BadZipFile, OSError) as error:
         raise fail(path, f"not a profile folder or a readable .zip ({error})") from None
@@ -318,7 +339,7 @@ def load_profile(path: str | os.PathLike) -> PenProfile:
         raise fail(path, f"{PROFILE_JSON} is not valid JSON ({error})") from None
     if not isinstance(document, dict):
         raise fail(path, f"{PROFILE_JSON} must hold a JSON object")
-    if document.get("format") != FORMAT:
+    if type(document.get("format")) is not int or document["format"] != FORMAT:
         raise fail(path, f"unknown profile format {document.get('format')!r} "
                          f"(this RealPen reads format {FORMAT})")
     try:

@@ -8,8 +8,9 @@ from typing import Iterator
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
 
-console = Console(soft_wrap=True)
-err_console = Console(stderr=True)
+# Markup off: paths, tool names and descriptions are the user's text, not rich markup.
+console = Console(soft_wrap=True, markup=False, highlight=False)
+err_console = Console(stderr=True, markup=False, highlight=False)
 
 PROGRESS_AFTER_S = 5.0  # recordings longer than this get a progress bar
 

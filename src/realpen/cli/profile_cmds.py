@@ -10,6 +10,7 @@ from rich.table import Table
 
 from ..actuator import parse_actuator
 from ..coupling import Coupling
+from ..errors import RealPenError
 from ..profile import build_profile, list_profiles, load_profile, resolve_profile, save_profile
 from ..recording import load_recording
 from ..sound import load_sound
@@ -72,15 +73,16 @@ def list_command(
     profiles: list[Path] = typer.Option([], "--profiles", help="Another folder of profiles."),
 ) -> None:
     """List the bundled and the user's profiles, one line each."""
-    table = Table("where", "profile", "version", "summary")
-    for where, path in list_profiles(profiles):
+    found = list_profiles(profiles)
+    for where, path in found:
         try:
             profile = load_profile(path)
-        except Exception as error:  # a broken bundle is listed, not fatal  # noqa: BLE001
-            table.add_row(where, path.name, "-", f"[red]unreadable: {error}[/]")
+        except RealPenError as error:  # a broken bundle is listed, not fatal
+            console.print(f"{path.name} ({where}): unreadable: {error}")
             continue
-        table.add_row(where, profile.name, profile.version, profile.summary().split(": ", 1)[1])
-    console.print(table)
+        console.print(f"{profile.summary()} ({where}, version {profile.version})")
+    if not found:
+        console.print("no profiles found")
 
 
 @profile_app.command("show")
@@ -91,7 +93,7 @@ def show(
     """Show a profile's components; optionally plot it like the method's Figure 8."""
     profile = resolve_profile(profile_ref)
     meta = profile.meta
-    console.print(f"[bold]{profile.summary()}[/]  (version {profile.version})")
+    console.print(f"{profile.summary()}  (version {profile.version})")
     if meta.description:
         console.print(meta.description)
     c = meta.coupling

@@ -45,7 +45,7 @@ def analyze(
     if json_out is not None:
         write_json(json_out, result.to_json())
     first, last = int(result.selected[0]), int(result.selected[-1])
-    console.print(f"[bold]{recording}[/]: {loaded.duration:.2f} s, {len(loaded.axes)} axis(es) "
+    console.print(f"{recording}: {loaded.duration:.2f} s, {len(loaded.axes)} axis(es) "
                   f"({', '.join(loaded.axes)}) at {loaded.rate:g} Hz → "
                   f"{prepared.axes[0]}, high-pass {highpass_hz:g} Hz")
     console.print(f"{len(result.starts_s)} units of {unit_ms:g} ms; selected units {first}–{last} "

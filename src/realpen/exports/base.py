@@ -9,7 +9,7 @@ from scipy.signal import resample_poly
 
 from ..errors import RealPenError
 
-MAX_REPEATS = 1000  # 25 min of a 1.5 s pattern; more is a typo, not a use
+MAX_REPEATS = 100  # 150 s of a 1.5 s pattern; players loop, files need not
 
 
 @dataclass
