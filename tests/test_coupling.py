@@ -219,3 +219,48 @@ def test_load_measurements(tmp_path):
         with pytest.raises(RealPenError, match=problem) as caught:
             load_measurements(bad)
         assert str(caught.value).startswith(str(bad))
+
+
+@pytest.mark.parametrize("fix", ["c_ov", "c_op"])
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf")])
+def test_fit_refuses_a_held_value_that_is_not_finite(fix, value):
+    pressure, speed, amplitude = measurements(seed=7)
+    with pytest.raises(RealPenError, match="--value must be a finite number"):
+        fit_coupling(pressure, speed, amplitude, fix, value, source="m.csv")
+
+
+@pytest.mark.parametrize("fix", ["c_ov", "c_op"])
+@pytest.mark.parametrize("value", [1e308, -1e308, 1e200, 1e12])
+def test_fit_refuses_constants_that_cannot_reproduce_the_fit(fix, value):
+    # Held far from the data, the other threshold becomes huge (or infinite) and the two terms
+    # of Eq. 1 cancel in floating point: the saved constants would not give the fitted gains.
+    pressure, speed, amplitude = measurements(seed=7)
+    with pytest.raises(RealPenError) as caught:
+        fit_coupling(pressure, speed, amplitude, fix, value, base=Coupling(a_max=10.0),
+                     source="m.csv")
+    message = str(caught.value)
+    assert message.startswith("m.csv: ") and "\n" not in message
+    assert fix in message and f"{value:g}" in message
+
+
+def test_fit_keeps_a_distant_but_representable_held_value():
+    pressure, speed, amplitude = measurements(seed=7)
+    base = Coupling(a_max=10.0)
+    near = fit_coupling(pressure, speed, amplitude, "c_ov", TRUTH["c_ov"], base)
+    far = fit_coupling(pressure, speed, amplitude, "c_ov", 1000.0, base)
+    assert math.isfinite(far.coupling.c_op) and far.coupling.c_ov == 1000.0
+    grid_p, grid_v = np.meshgrid(np.linspace(0.01, 1, 20), np.linspace(0, 200, 20))
+    np.testing.assert_allclose(far.coupling.gain_raw(grid_p, grid_v),
+                               near.coupling.gain_raw(grid_p, grid_v), atol=1e-9)
+
+
+def test_measurement_errors_name_the_file_line(tmp_path):
+    cases = {"pressure,speed,amplitude\n\n0.5,10,0.3\n\n0.5,-3,0.3\n": "line 5: speed -3",
+             "\n\npressure,speed,amplitude\n0.5,10,0.3\n1.5,10,0.3\n": "line 5: pressure 1.5",
+             "pressure,speed,amplitude\n0.5,10,0.3\n\n0.5,10,loud\n": "line 4: 'loud'"}
+    for content, problem in cases.items():
+        path = tmp_path / "m.csv"
+        path.write_text(content)
+        with pytest.raises(RealPenError, match=problem) as caught:
+            load_measurements(path)
+        assert "data row" not in str(caught.value)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -104,8 +105,14 @@ def test_sound_render_with_a_loop_file_a_coupling_and_granular_mode(tmp_path, re
                                                                     trajectory):
     assert realpen("sound", "loop", recording, "-o", "loop.wav", cwd=tmp_path).returncode == 0
     Coupling(c_p=0.0, c_op=0.0, c_x=0.01, c_ov=0.0).save(tmp_path / "speed_only.json")
+    # a ready loop is played as it is only when --as-loop says so; otherwise it is searched
+    # for a unit, which a 300 ms file cannot hold
     done = realpen("sound", "render", "--sound", "loop.wav", "--trajectory", trajectory,
                    "--coupling", "speed_only.json", "-o", "a.wav", cwd=tmp_path)
+    assert_clean_failure(done, "loop.wav")
+    assert "--as-loop" in done.stderr and not (tmp_path / "a.wav").exists()
+    done = realpen("sound", "render", "--sound", "loop.wav", "--as-loop", "--trajectory",
+                   trajectory, "--coupling", "speed_only.json", "-o", "a.wav", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert "the file as a loop" in done.stdout
     out, _ = sf.read(tmp_path / "a.wav")
@@ -252,3 +259,160 @@ def test_sound_loop_on_lmt108_rough_paper(tmp_path, trajectory):
     done = realpen("sound", "render", "--sound", ROUGH_PAPER, "--trajectory", trajectory,
                    "-o", "rough.wav", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
+
+
+# --- limits on options, outputs all-or-nothing -----------------------------------------------
+
+def render_args(recording: Path, trajectory: Path, *extra: str) -> list:
+    return ["sound", "render", "--sound", recording.name, "--trajectory", trajectory.name,
+            "-o", "out.wav", *extra]
+
+
+@pytest.mark.parametrize("command", ["loop", "loop granular", "render", "render granular"])
+@pytest.mark.parametrize("level", ["nan", "inf", "300", "0.1"])
+def test_level_must_be_finite_and_at_most_0_dbfs(tmp_path, recording, trajectory, command,
+                                                 level):
+    mode = ["--mode", "granular"] if command.endswith("granular") else []
+    args = (["sound", "loop", recording.name, "-o", "loop.wav", "--json", "r.json"]
+            if command.startswith("loop") else render_args(recording, trajectory))
+    before = {p.name for p in tmp_path.iterdir()}
+    done = realpen(*args, *mode, "--level-dbfs", level, cwd=tmp_path)
+    assert_refused(done, "--level-dbfs", tmp_path, before)
+    assert "at most 0 dBFS" in done.stderr
+
+
+@pytest.mark.parametrize("command", ["loop", "render", "render granular"])
+@pytest.mark.parametrize("rate", ["100", "222", "7000"])
+def test_a_rate_too_low_is_refused_naming_the_minimum(tmp_path, recording, trajectory, command,
+                                                      rate):
+    mode = ["--mode", "granular"] if command.endswith("granular") else []
+    args = (["sound", "loop", recording.name, "-o", "loop.wav", "--json", "r.json"]
+            if command == "loop" else render_args(recording, trajectory))
+    before = {p.name for p in tmp_path.iterdir()}
+    done = realpen(*args, *mode, "--rate", rate, cwd=tmp_path)
+    assert_refused(done, "--rate", tmp_path, before)
+    assert "too low" in done.stderr and "8000 Hz" in done.stderr
+
+
+@pytest.mark.parametrize("command", ["loop", "loop granular", "render", "render granular"])
+def test_constant_recording_is_refused_as_silence(tmp_path, trajectory, command):
+    sf.write(tmp_path / "const.wav", np.full(3 * 44100, 0.5), 44100, subtype="PCM_16")
+    mode = ["--mode", "granular"] if command.endswith("granular") else []
+    args = (["sound", "loop", "const.wav", "-o", "loop.wav"] if command.startswith("loop")
+            else ["sound", "render", "--sound", "const.wav", "--trajectory", trajectory.name,
+                  "-o", "out.wav"])
+    before = {p.name for p in tmp_path.iterdir()}
+    done = realpen(*args, *mode, cwd=tmp_path)
+    assert_refused(done, "const.wav", tmp_path, before)
+    assert "silent" in done.stderr and "constant" in done.stderr
+
+
+@pytest.mark.parametrize("args,problem", [
+    (["--unit-ms", "nan"], "--unit-ms"), (["--unit-ms", "0"], "--unit-ms"),
+    (["--crossfade-ms", "nan"], "--crossfade-ms"), (["--crossfade-ms", "-1"], "--crossfade-ms"),
+    (["--grain-ms", "nan"], "--grain-ms"), (["--mode", "granular", "--grain-ms", "inf"],
+                                            "--grain-ms"),
+    (["--mode", "granular", "--as-loop"], "--as-loop"),
+])
+def test_sound_render_refuses_bad_lengths(tmp_path, recording, trajectory, args, problem):
+    before = {p.name for p in tmp_path.iterdir()}
+    done = realpen(*render_args(recording, trajectory), *args, cwd=tmp_path)
+    assert_refused(done, problem, tmp_path, before)
+
+
+def test_sound_render_refuses_a_recording_shorter_than_the_unit_unless_told_it_is_a_loop(
+        tmp_path, trajectory):
+    sf.write(tmp_path / "short.wav", friction_like(0.2, 5), 44100, subtype="PCM_16")
+    before = {p.name for p in tmp_path.iterdir()}
+    done = realpen("sound", "render", "--sound", "short.wav", "--trajectory", trajectory.name,
+                   "-o", "out.wav", cwd=tmp_path)
+    assert_refused(done, "short.wav", tmp_path, before)
+    assert "shorter than the 300 ms unit" in done.stderr and "--as-loop" in done.stderr
+    done = realpen("sound", "render", "--sound", "short.wav", "--as-loop", "--trajectory",
+                   trajectory.name, "-o", "out.wav", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "the file as a loop" in done.stdout
+    help_text = " ".join(realpen("sound", "render", "--help").stdout.split())
+    assert "--as-loop" in help_text and "ready loop" in help_text
+
+
+def test_granular_length_is_bounded_and_the_help_says_so(tmp_path, recording):
+    before = {p.name for p in tmp_path.iterdir()}
+    done = realpen("sound", "loop", recording.name, "--mode", "granular", "--length-ms", "1e9",
+                   "-o", "g.wav", "--json", "g.json", cwd=tmp_path)
+    assert_refused(done, "--length-ms", tmp_path, before)
+    assert "at most 60000 ms (60 s)" in done.stderr
+    help_text = " ".join(realpen("sound", "loop", "--help").stdout.split())
+    assert "60000" in help_text and "8000" in help_text
+
+
+@pytest.mark.parametrize("value,names", [("nan", "--value"), ("inf", "--value"),
+                                         ("-inf", "--value"), ("1e308", "m.csv")])
+@pytest.mark.parametrize("fix", ["c_ov", "c_op"])
+def test_sound_fit_refuses_a_held_value_that_breaks_the_constants(tmp_path, value, names, fix):
+    rng = np.random.default_rng(4)
+    pressure, speed = rng.uniform(0.25, 1, 100), rng.uniform(15, 150, 100)
+    amplitude = 0.9 * (pressure - 0.2) + 0.012 * (speed - 8) + rng.normal(0, 0.01, 100)
+    rows = "\n".join(f"{p:.5f},{v:.4f},{a:.5f}" for p, v, a in zip(pressure, speed, amplitude))
+    (tmp_path / "m.csv").write_text("pressure,speed,amplitude\n" + rows + "\n")
+    before = {p.name for p in tmp_path.iterdir()}
+    done = realpen("sound", "fit", "m.csv", "-o", "coupling.json", "--fix", fix,
+                   f"--value={value}", "--json", "fit.json", cwd=tmp_path)
+    assert_refused(done, names, tmp_path, before)
+
+
+def test_sound_loop_writes_nothing_when_the_report_cannot_be_written(tmp_path, recording):
+    (tmp_path / "reports").mkdir()
+    before = {p.name for p in tmp_path.iterdir()}
+    done = realpen("sound", "loop", recording.name, "-o", "loop.wav", "--json", "reports",
+                   cwd=tmp_path)
+    assert_refused(done, "reports", tmp_path, before)
+    assert not any((tmp_path / "reports").iterdir())
+    done = realpen("sound", "loop", recording.name, "-o", "same", "--json", "same",
+                   cwd=tmp_path)
+    assert_refused(done, "same", tmp_path, before)
+
+
+def test_sound_fit_writes_nothing_when_the_report_cannot_be_written(tmp_path):
+    rng = np.random.default_rng(5)
+    pressure, speed = rng.uniform(0.25, 1, 50), rng.uniform(15, 150, 50)
+    amplitude = 0.9 * (pressure - 0.2) + 0.012 * (speed - 8)
+    rows = "\n".join(f"{p:.5f},{v:.4f},{a:.5f}" for p, v, a in zip(pressure, speed, amplitude))
+    (tmp_path / "m.csv").write_text("pressure,speed,amplitude\n" + rows + "\n")
+    (tmp_path / "reports").mkdir()
+    before = {p.name for p in tmp_path.iterdir()}
+    done = realpen("sound", "fit", "m.csv", "-o", "coupling.json", "--json", "reports",
+                   cwd=tmp_path)
+    assert_refused(done, "reports", tmp_path, before)
+
+
+@pytest.mark.parametrize("mode", ["loop", "granular"])
+def test_a_report_holding_nan_is_refused_before_the_wav_is_written(tmp_path, recording,
+                                                                    monkeypatch, mode):
+    from realpen.cli import sound_cmds
+    from realpen.errors import RealPenError
+    from realpen.granular import GranularTexture
+    from realpen.sound import LoopUnit
+
+    for kind in (LoopUnit, GranularTexture):
+        real = kind.to_json
+        monkeypatch.setattr(kind, "to_json",
+                            lambda self, real=real: {**real(self), "gain": float("nan")})
+    before = {p.name for p in tmp_path.iterdir()}
+    with pytest.raises(RealPenError, match="r.json: .*NaN or infinite") as caught:
+        sound_cmds.loop(recording, tmp_path / "loop.wav", unit_ms=300.0, crossfade_ms=10.0,
+                        mode=mode, length_ms=1000.0, grain_ms=50.0, seed=0, rate=48000.0,
+                        level_dbfs=-20.0, json_out=tmp_path / "r.json")
+    assert "\n" not in str(caught.value)
+    assert {p.name for p in tmp_path.iterdir()} == before
+
+
+def test_bench_sound_reports_scan_time_and_real_time_factor(tmp_path):
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_sound.py"
+    done = subprocess.run([sys.executable, str(script), "--seconds", "1.5", "3", "--repeat", "1"],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in done.stdout.splitlines() if line.startswith("scan ")]
+    assert len(lines) == 2, done.stdout
+    for line, seconds in zip(lines, ("1.5 s", "3 s")):
+        assert seconds in line and " s (" in line and "x real time" in line

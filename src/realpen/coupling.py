@@ -45,12 +45,13 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 from scipy import optimize, signal
 
-from .csvtable import read_columns
+from .csvtable import read_table
 from .errors import RealPenError, fail
 from .fileio import write_json
 
 FORMAT = "realpen.coupling/1"
 FIXABLE = ("c_ov", "c_op")
+REPRODUCE_TOLERANCE = 1e-9  # gain units: the saved constants must give the fitted gains
 
 
 class Coupling(BaseModel):
@@ -156,7 +157,7 @@ def one_pole(values: np.ndarray, rate: float, smoothing_ms: float,
 
     Args:
         values: control signal, one value per sample.
-        rate: samples per second.
+        rate: samples per second, in Hz.
         smoothing_ms: time constant in ms.
         initial: the state before the first sample.
     """
@@ -175,8 +176,9 @@ class CouplingFit:
 
     Attributes:
         coupling: the fitted parameters (other fields from the base coupling).
-        offset: the identifiable constant ``c_p·c_op + c_x·c_ov``.
-        fixed: which threshold was held (``"c_ov"`` or ``"c_op"``) and its value.
+        offset: the identifiable constant ``c_p·c_op + c_x·c_ov`` (linear gain).
+        fixed: which threshold was held (``"c_ov"`` or ``"c_op"``) and its value (mm/s for
+            ``c_ov``, normalised pressure for ``c_op``).
         rows: pen-down measurements used; clamped: how many of them lie at 0 or ``a_max``.
         rmse: root-mean-square residual of the clamped model (amplitude units).
         r2: coefficient of determination of the clamped model.
@@ -210,18 +212,23 @@ def fit_coupling(pressure: np.ndarray, speed: np.ndarray, amplitude: np.ndarray,
         speed: speed in mm/s.
         amplitude: measured gain (same scale as ``A_s``).
         fix: the threshold held at ``value``: ``"c_ov"`` (default) or ``"c_op"``.
-        value: its value (None: the base coupling's).
+        value: its value, finite (mm/s for ``c_ov``, normalised pressure for ``c_op``; None:
+            the base coupling's).
         base: supplies ``a_max``, the smoother, the playback rate and the default ``value``.
         source: names the data in error messages.
 
     Raises:
-        RealPenError: too few pen-down rows, pressure and speed not varying independently, or
-            a held threshold that cannot be solved for (its partner's coefficient is 0).
+        RealPenError: too few pen-down rows, pressure and speed not varying independently, a
+            held value that is not finite, a held threshold that cannot be solved for (its
+            partner's coefficient is 0), or constants that are not finite or too large to
+            reproduce the fitted gains in floating point (a held value far from the data).
     """
     base = base or Coupling()
     if fix not in FIXABLE:
         raise RealPenError(f"--fix: choose c_ov or c_op, got '{fix}'")
     held = float(getattr(base, fix) if value is None else value)
+    if not math.isfinite(held):
+        raise RealPenError(f"--value must be a finite number, got {held:g}")
     pressure, speed, amplitude = (np.asarray(a, dtype=np.float64) for a in
                                   (pressure, speed, amplitude))
     down = pressure > 0
@@ -250,8 +257,21 @@ def fit_coupling(pressure: np.ndarray, speed: np.ndarray, amplitude: np.ndarray,
         if abs(c_x) < 1e-12:
             raise fail(source, "speed has no effect in these data; hold c_ov instead")
         params = {"c_op": held, "c_ov": (offset - c_p * held) / c_x}
-    coupling = base.model_copy(update={"c_p": c_p, "c_x": c_x, **params})
+    fitted = {"c_p": c_p, "c_x": c_x, **params}
+    try:  # model_copy(update=...) would skip validation and let inf/NaN through
+        coupling = Coupling.model_validate({**base.model_dump(), **fitted})
+    except ValidationError as error:
+        name = str(error.errors()[0]["loc"][0])
+        raise fail(source, f"the fit gives {name} = {fitted.get(name, float('nan')):g}, not a "
+                           f"finite number (--value {held:g} for {fix} is too far from the "
+                           f"data)") from None
     predicted = coupling.gain_raw(pressure[down], speed[down])
+    exact = np.clip(design @ solution, 0.0, base.a_max)
+    if not np.allclose(predicted, exact, rtol=0.0, atol=REPRODUCE_TOLERANCE):
+        other = "c_op" if fix == "c_ov" else "c_ov"
+        raise fail(source, f"--value {held:g} for {fix} gives {other} = {params[other]:g}; "
+                           f"constants this large no longer reproduce the fitted gains in "
+                           f"floating point (hold a value nearer the data)")
     residual = predicted - target
     spread = float(np.sum((target - target.mean()) ** 2))
     return CouplingFit(coupling=coupling, offset=offset, fixed=(fix, held), rows=len(target),
@@ -265,12 +285,13 @@ def load_measurements(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
     Raises:
         RealPenError: any problem with the file or a value out of range.
     """
-    columns = read_columns(path, ("pressure", "speed", "amplitude"))
+    table = read_table(path, ("pressure", "speed", "amplitude"))
+    columns = table.columns
     checks = (("pressure", 0.0, 1.0), ("speed", 0.0, np.inf), ("amplitude", 0.0, np.inf))
     for name, low, high in checks:
         bad = np.flatnonzero((columns[name] < low) | (columns[name] > high))
         if len(bad):
             limits = f"between {low:g} and {high:g}" if np.isfinite(high) else f"at least {low:g}"
-            raise fail(path, f"data row {bad[0] + 1}: {name} {columns[name][bad[0]]:g} must be "
-                             f"{limits}")
+            raise fail(path, f"line {table.lines[bad[0]]}: {name} {columns[name][bad[0]]:g} "
+                             f"must be {limits}")
     return columns["pressure"], columns["speed"], columns["amplitude"]

@@ -6,8 +6,8 @@ Every problem with the file becomes one :class:`~realpen.errors.RealPenError` na
 from __future__ import annotations
 
 import csv
-import io
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -16,12 +16,35 @@ import numpy as np
 from .errors import fail
 
 
+@dataclass(frozen=True)
+class Table:
+    """Columns read from a CSV file, and the file line each data row came from.
+
+    Attributes:
+        columns: one float64 array per required column name (lower case).
+        lines: the 1-based line number in the file of each data row (blank lines count), so
+            that later checks of the values can name the line an editor shows.
+    """
+
+    columns: dict[str, np.ndarray]
+    lines: np.ndarray
+
+
 def read_columns(path: str | os.PathLike, required: Sequence[str],
                  min_rows: int = 1) -> dict[str, np.ndarray]:
     """Read the ``required`` columns of a comma-separated file with a header row.
 
+    The same as :func:`read_table` without the line numbers.
+    """
+    return read_table(path, required, min_rows).columns
+
+
+def read_table(path: str | os.PathLike, required: Sequence[str], min_rows: int = 1) -> Table:
+    """Read the ``required`` columns of a comma-separated file with a header row.
+
     Column names are matched case-insensitively and surrounding spaces are ignored; other
-    columns are allowed and ignored. Every value must be a finite number.
+    columns are allowed and ignored. Every value must be a finite number. Blank lines are
+    skipped; messages name the line as counted in the file (the first line is line 1).
 
     Args:
         path: the CSV file.
@@ -29,7 +52,8 @@ def read_columns(path: str | os.PathLike, required: Sequence[str],
         min_rows: fewest data rows accepted.
 
     Returns:
-        One float64 array per required name (lower case), all of the same length.
+        The :class:`Table`: one float64 array per required name (lower case), all of the same
+        length, and the file line of each row.
 
     Raises:
         RealPenError: missing, empty or binary file; missing columns; ragged rows; non-numeric,
@@ -43,23 +67,32 @@ def read_columns(path: str | os.PathLike, required: Sequence[str],
     if path.stat().st_size == 0:
         raise fail(path, "file is empty")
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        text = path.read_text(encoding="utf-8-sig")  # universal newlines: \r\n and \r become \n
     except UnicodeDecodeError:
         raise fail(path, "not a text CSV file") from None
-    lines = [line for line in text.splitlines() if line.strip()]
-    if not lines:
+    numbered = [(number, line) for number, line in enumerate(text.split("\n"), start=1)
+                if line.strip()]
+    if not numbered:
         raise fail(path, "file holds only blank lines")
-    rows = list(csv.reader(io.StringIO("\n".join(lines))))
-    header = [name.strip().lower() for name in rows[0]]
+    rows = []
+    for number, line in numbered:
+        try:
+            rows.append((number, next(csv.reader([line]))))
+        except csv.Error as error:
+            raise fail(path, f"line {number}: not a CSV row ({error})") from None
+    header_line, header_row = rows[0]
+    header = [name.strip().lower() for name in header_row]
     missing = [name for name in required if name.lower() not in header]
     if missing:
-        raise fail(path, f"CSV header needs the column(s) {', '.join(required)}; "
-                         f"missing {', '.join(missing)} (header: {','.join(rows[0])})")
-    if len(rows) - 1 < min_rows:
-        raise fail(path, f"CSV needs at least {min_rows} data row(s), has {len(rows) - 1}")
+        raise fail(path, f"line {header_line}: CSV header needs the column(s) "
+                         f"{', '.join(required)}; missing {', '.join(missing)} "
+                         f"(header: {','.join(header_row)})")
+    data = rows[1:]
+    if len(data) < min_rows:
+        raise fail(path, f"CSV needs at least {min_rows} data row(s), has {len(data)}")
     indices = [header.index(name.lower()) for name in required]
-    values = np.empty((len(rows) - 1, len(required)))
-    for line_no, row in enumerate(rows[1:], start=2):
+    values = np.empty((len(data), len(required)))
+    for position, (line_no, row) in enumerate(data):
         if len(row) != len(header):
             raise fail(path, f"line {line_no}: {len(row)} values for the {len(header)} columns "
                              f"of the header")
@@ -73,5 +106,6 @@ def read_columns(path: str | os.PathLike, required: Sequence[str],
             if not np.isfinite(value):
                 raise fail(path, f"line {line_no}: column '{required[column]}' is {cell} "
                                  f"(NaN or infinite)")
-            values[line_no - 2, column] = value
-    return {name.lower(): values[:, column] for column, name in enumerate(required)}
+            values[position, column] = value
+    return Table(columns={name.lower(): values[:, column] for column, name in enumerate(required)},
+                 lines=np.array([number for number, _ in data], dtype=np.int64))

@@ -25,11 +25,12 @@ from scipy.ndimage import uniform_filter1d
 from . import __version__
 from .errors import RealPenError, fail
 from .recording import Recording
-from .sound import (EDGE_MS, HOP_MS, REFERENCE_DBFS, SILENCE_DB, Seam, level_db, require_sound,
-                    samples_for, seam_report)
+from .sound import (EDGE_MS, HOP_MS, REFERENCE_DBFS, SILENCE_DB, Seam, check_level, check_ms,
+                    check_rate, level_db, require_sound, samples_for, seam_report)
 
 GRAIN_MS = 50.0
 LENGTH_MS = 3000.0
+MAX_LENGTH_MS = 60000.0  # longest texture: 60 s (23 MB at 48 kHz); a loop need not be longer
 STEADY_DB = 6.0
 LEVEL_SMOOTH_MS = 100.0
 _BLOCK = 1024  # grains rendered at once
@@ -57,15 +58,18 @@ def steady_part(x: np.ndarray, rate: float, span_ms: float, tolerance_db: float 
     """Find the grain starts whose next ``span_ms`` lie in the steady part of ``x``.
 
     Args:
-        x: the recording, shape (frames,).
-        rate: its rate in Hz.
+        x: the recording, shape (frames,), full scale ±1.
+        rate: its rate in Hz (``MIN_RATE`` to ``MAX_RATE`` of :mod:`realpen.sound`).
         span_ms: how much a grain reads, in ms (grain length × the highest playback rate).
         tolerance_db: allowed distance of the smoothed level from its median, in dB.
+        source: names the recording in error messages.
 
     Raises:
-        RealPenError: silence, or no steady stretch as long as ``span_ms``.
+        RealPenError: a rate out of range, silence, or no steady stretch as long as ``span_ms``.
     """
     x = np.asarray(x, dtype=np.float64)
+    check_rate(rate)
+    check_ms("span_ms", span_ms)
     require_sound(x, source)
     block = max(1, int(HOP_MS * rate / 1000))
     span = int(np.ceil(span_ms * rate / 1000))
@@ -101,7 +105,7 @@ def steady_part(x: np.ndarray, rate: float, span_ms: float, tolerance_db: float 
 
 
 def grain_samples(grain_ms: float, rate: float) -> int:
-    """Grain length in samples: even, at least 4."""
+    """Length in samples of a ``grain_ms`` ms grain at ``rate`` Hz: even, at least 4."""
     grain = samples_for(grain_ms, rate)
     return max(4, grain - grain % 2)
 
@@ -170,7 +174,17 @@ def granular(x: np.ndarray, rate: float, frames: int, part: SteadyPart,
 
 @dataclass(frozen=True)
 class GranularTexture:
-    """A seamless granular loop and where its grains came from."""
+    """A seamless granular loop and where its grains came from.
+
+    Attributes:
+        samples: the texture, shape (frames,), full scale ±1.
+        rate: its rate in Hz.
+        part: the steady part the grains came from (positions in samples).
+        grain_ms: grain length in ms; seed: seed of the grain offsets.
+        seam: the texture's seam report (dB).
+        gain: linear gain applied to the grains (steady RMS → the requested dBFS).
+        source, source_sha256, history: the recording.
+    """
 
     samples: np.ndarray
     rate: float
@@ -216,17 +230,32 @@ def granular_loop(x: np.ndarray, rate: float, length_ms: float = LENGTH_MS,
 
     The texture is scaled so the steady material has an RMS of ``rms_dbfs`` dB re full scale.
 
+    Args:
+        x: the recording, shape (frames,), full scale ±1.
+        rate: its rate in Hz (also the texture's).
+        length_ms: texture length in ms, from 60 ms (and two grains) up to ``MAX_LENGTH_MS``
+            (60 s).
+        grain_ms: grain length in ms (finite, positive).
+        seed: seed of the random grain offsets (≥ 0).
+        rms_dbfs: RMS of the steady material in dBFS, finite and at most 0.
+        source: names the recording in error messages.
+        recording: the loaded recording, for provenance in the JSON.
+
     Raises:
-        RealPenError: bad lengths, silence, or no steady stretch as long as a grain.
+        RealPenError: a rate out of range, bad lengths or level, silence, or no steady stretch
+            as long as a grain.
     """
-    if not np.isfinite(grain_ms) or grain_ms <= 0:
-        raise RealPenError(f"--grain-ms must be positive, got {grain_ms:g}")
+    check_rate(rate)
+    check_ms("--grain-ms", grain_ms)
+    check_ms("--length-ms", length_ms)
+    check_level(rms_dbfs)
     hop = grain_samples(grain_ms, rate) // 2
-    if not np.isfinite(length_ms) or length_ms < 3 * EDGE_MS or length_ms < 2 * grain_ms:
-        raise RealPenError(f"--length-ms must be at least {max(3 * EDGE_MS, 2 * grain_ms):g} ms, "
-                           f"got {length_ms:g}")
-    if not np.isfinite(rms_dbfs):
-        raise RealPenError(f"--level-dbfs must be a finite number, got {rms_dbfs:g}")
+    shortest = max(3 * EDGE_MS, 2 * grain_ms)
+    if length_ms < shortest:
+        raise RealPenError(f"--length-ms must be at least {shortest:g} ms, got {length_ms:g}")
+    if length_ms > MAX_LENGTH_MS:
+        raise RealPenError(f"--length-ms must be at most {MAX_LENGTH_MS:g} ms "
+                           f"({MAX_LENGTH_MS / 1000:g} s), got {length_ms:g}")
     frames = max(1, int(round(length_ms * rate / 1000 / hop))) * hop
     part = steady_part(x, rate, (grain_samples(grain_ms, rate) + 2) * 1000 / rate, source=source)
     texture = granular(x, rate, frames, part, grain_ms, seed, circular=True)

@@ -28,6 +28,12 @@ already differ by 3–5 dB per band by chance. Windows whose level, head or tail
 ``SILENCE_DB`` below the recording's loud frames (95th percentile) are rejected as near silence.
 The scan measures head and tail exactly as :func:`seam_report` measures the finished loop, so
 the chosen window's ``level_jump_db`` is the seam's.
+
+Limits, checked wherever a value is taken (one-line :class:`~realpen.errors.RealPenError`):
+rates from ``MIN_RATE`` (8 kHz: the bands need room between 100 Hz and 0.45 × rate) to
+``MAX_RATE`` (384 kHz); lengths in ms finite and positive; a loop level (RMS, dBFS) finite and
+at most 0 dBFS; a recording whose level with its mean removed lies below ``SILENT_DBFS`` —
+digital silence, or a constant (DC) value — is refused as silent.
 """
 
 from __future__ import annotations
@@ -52,6 +58,9 @@ HOP_MS = 5.0            # scan step; the issue asks for ≤ 5 ms
 SILENCE_DB = 30.0       # below the recording's loud frames: near silence
 SILENT_DBFS = -90.0     # a whole recording quieter than this is silence (16-bit LSB ≈ −96 dBFS)
 REFERENCE_DBFS = -20.0  # RMS of a normalised loop: the level that coupling gain 1 plays at
+MAX_LEVEL_DBFS = 0.0    # highest loop level (RMS) accepted
+MIN_RATE = 8000.0       # Hz; below it the 100 Hz–0.45·rate bands of the seam measures collapse
+MAX_RATE = 384000.0     # Hz; the highest common audio rate
 FLOOR_DB = 80.0         # band levels further below the loud frames are treated as equal
 BANDS = (24, 100.0, 16000.0)
 WEIGHTS = {"level_jump_db": 3.0, "spectral_db": 1.0, "stationarity_db": 1.0,
@@ -67,17 +76,74 @@ def samples_for(ms: float, rate: float) -> int:
     return int(round(ms * rate / 1000.0))
 
 
+def check_ms(name: str, value: float) -> float:
+    """Return ``value`` (a length in ms) as float; :class:`RealPenError` unless finite and > 0.
+
+    Args:
+        name: the option that gave it, e.g. ``"--unit-ms"``, for the message.
+        value: the length in ms.
+    """
+    if not np.isfinite(value) or value <= 0:
+        raise RealPenError(f"{name} must be a finite number of ms above 0, got {value:g}")
+    return float(value)
+
+
+def check_rate(rate: float, name: object = "--rate") -> float:
+    """Return a sample rate in Hz as float, between ``MIN_RATE`` and ``MAX_RATE`` Hz.
+
+    Args:
+        rate: sample rate in Hz.
+        name: the option or the file that gave it, for the message.
+
+    Raises:
+        RealPenError: a rate that is not finite, or outside 8 kHz – 384 kHz.
+    """
+    if not np.isfinite(rate) or rate <= 0:
+        raise RealPenError(f"{name} must be a positive number of Hz, got {rate:g}")
+    if rate < MIN_RATE:
+        raise RealPenError(f"{name}: {rate:g} Hz is too low for friction sound; the minimum is "
+                           f"{MIN_RATE:g} Hz (the seam is judged on bands from 100 Hz up to "
+                           f"0.45 × rate)")
+    if rate > MAX_RATE:
+        raise RealPenError(f"{name}: {rate:g} Hz is too high; the maximum is {MAX_RATE:g} Hz")
+    return float(rate)
+
+
+def check_level(level_dbfs: float, name: str = "--level-dbfs") -> float:
+    """Return a loop level (RMS in dB re full scale) as float; finite and ≤ ``MAX_LEVEL_DBFS``.
+
+    Args:
+        level_dbfs: RMS level in dBFS.
+        name: the option that gave it, for the message.
+    """
+    if not np.isfinite(level_dbfs) or level_dbfs > MAX_LEVEL_DBFS:
+        raise RealPenError(f"{name} must be a finite level of at most {MAX_LEVEL_DBFS:g} dBFS, "
+                           f"got {level_dbfs:g}")
+    return float(level_dbfs)
+
+
 def level_db(x: np.ndarray) -> float:
-    """RMS level of ``x`` in dB re full scale (−inf for digital silence)."""
+    """RMS level of ``x`` (full scale ±1) in dB re full scale, i.e. dBFS (−inf for silence)."""
     power = float(np.mean(np.square(x))) if len(x) else 0.0
     return 10 * np.log10(power) if power > 0 else -np.inf
 
 
 def require_sound(x: np.ndarray, source: object) -> None:
-    """Raise :class:`RealPenError` when ``x`` is silent (RMS below ``SILENT_DBFS``)."""
-    level = level_db(x)
+    """Raise :class:`RealPenError` when ``x`` is silent: its RMS with its mean removed lies below
+    ``SILENT_DBFS`` dBFS.
+
+    The mean is removed so that a constant (DC) signal, which holds no sound however large its
+    value, counts as silence too.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    level = level_db(x - np.mean(x)) if len(x) else -np.inf
     if level < SILENT_DBFS:
-        shown = "digital silence" if not np.isfinite(level) else f"RMS {level:.0f} dBFS"
+        if len(x) and np.ptp(x) == 0 and x[0] != 0:
+            shown = f"a constant value of {x[0]:g}: a DC offset, no sound"
+        elif not np.any(x):
+            shown = "digital silence"
+        else:
+            shown = f"RMS {level:.0f} dBFS with the DC offset removed"
         raise fail(source, f"recording is silent ({shown})")
 
 
@@ -86,34 +152,44 @@ def load_sound(path: str | os.PathLike, rate: float | None = DEFAULT_RATE) -> Re
 
     Args:
         path: the audio file.
-        rate: resample to this rate in Hz (default 48 kHz); None keeps the file's rate.
+        rate: resample to this rate in Hz (default 48 kHz); None keeps the file's rate. Either
+            must lie between ``MIN_RATE`` (8 kHz) and ``MAX_RATE`` (384 kHz).
 
     Returns:
         A one-axis :class:`~realpen.recording.Recording` (axis ``"mono"``, full scale ±1).
 
     Raises:
-        RealPenError: missing, empty, truncated or non-audio files, NaN/inf, silence.
+        RealPenError: missing, empty, truncated or non-audio files, NaN/inf, a rate out of
+            range, silence or a constant (DC) signal.
     """
     path = Path(path)
+    if rate is not None:
+        check_rate(rate)
     if path.suffix.lower() in NOT_AUDIO:
         raise fail(path, "not an audio file (give a WAV, FLAC or OGG recording)")
     loaded = load_recording(path)
     channels = loaded.samples.shape[1]
     mono = loaded.samples.mean(axis=1)
     step = f"mixdown:{channels}ch" if channels > 1 else "mono"
+    # Judged before resampling too: the filter's edge transients would give a constant (DC)
+    # recording an AC part of its own.
+    require_sound(mono, path)
     sound = loaded.with_samples(mono[:, None], step, axes=("mono",))
-    if rate is not None:
-        if not np.isfinite(rate) or rate <= 0:
-            raise RealPenError(f"--rate must be a positive number, got {rate:g}")
+    if rate is None:
+        check_rate(sound.rate, path)
+    else:
         sound = resample(sound, float(rate))
     require_sound(sound.mono, path)
     return sound
 
 
 def normalise(x: np.ndarray, rms_dbfs: float = REFERENCE_DBFS) -> tuple[np.ndarray, float]:
-    """Scale ``x`` to an RMS of ``rms_dbfs`` dB re full scale; returns (scaled, linear gain)."""
-    if not np.isfinite(rms_dbfs):
-        raise RealPenError(f"--level-dbfs must be a finite number, got {rms_dbfs:g}")
+    """Scale ``x`` to an RMS of ``rms_dbfs`` dB re full scale; returns (scaled, linear gain).
+
+    Raises:
+        RealPenError: ``rms_dbfs`` not finite or above ``MAX_LEVEL_DBFS`` (0 dBFS).
+    """
+    check_level(rms_dbfs)
     level = level_db(x)
     if not np.isfinite(level):
         return np.array(x, dtype=np.float64), 1.0
@@ -147,8 +223,8 @@ def make_loop(x: np.ndarray, start: int, length: int, fade: int,
               compensate: bool = True) -> tuple[np.ndarray, float]:
     """Cut ``x[start:start+length]`` and blend its first ``fade`` samples with what follows it.
 
-    Needs ``x`` to hold ``start + length + fade`` samples. Returns (loop, correlation ρ of the
-    blended segments).
+    ``start``, ``length`` and ``fade`` are in samples; ``x`` must hold ``start + length + fade``
+    samples. Returns (loop, correlation ρ of the blended segments, −1 to 1).
     """
     unit = np.array(x[start:start + length], dtype=np.float64)
     if fade == 0:
@@ -169,8 +245,14 @@ def _correlation(dot, energy_a, energy_b):
 def band_levels_db(frames: np.ndarray, rate: float, floor_power: float) -> np.ndarray:
     """Log-band spectra of frames: (frames, bands) in dB re full scale, floored.
 
-    Bands are log-spaced between ``BANDS`` edges; each holds at least one FFT bin. Powers are
-    scaled so the bands of a frame add up to its mean square (Hann window).
+    Bands are log-spaced between ``BANDS`` edges (Hz, the top one at most 0.45 × rate); each
+    holds at least one FFT bin. Powers are scaled so the bands of a frame add up to its mean
+    square (Hann window).
+
+    Args:
+        frames: one frame per row (samples, full scale ±1).
+        rate: their rate in Hz.
+        floor_power: lowest band power kept (linear, full scale² per sample).
     """
     frames = np.atleast_2d(frames)
     width = frames.shape[1]
@@ -219,15 +301,22 @@ def seam_report(loop: np.ndarray, rate: float, edge_ms: float = EDGE_MS,
     """Measure the wrap of a loop: level jump and spectral flux against the loop's own flux.
 
     Args:
-        loop: the looping signal, shape (frames,).
-        rate: its rate in Hz.
+        loop: the looping signal, shape (frames,), full scale ±1.
+        rate: its rate in Hz (``MIN_RATE`` to ``MAX_RATE``).
         edge_ms: frame length in ms for levels and spectra.
         hop_ms: step in ms between the inside frame pairs.
+        source: names the loop in error messages.
+
+    Returns:
+        The :class:`Seam` (figures in dB, the percentile in percent).
 
     Raises:
-        RealPenError: a loop shorter than three frames.
+        RealPenError: a rate out of range, bad lengths, or a loop shorter than three frames.
     """
     loop = np.asarray(loop, dtype=np.float64)
+    check_rate(rate)
+    check_ms("edge_ms", edge_ms)
+    check_ms("hop_ms", hop_ms)
     edge, hop = samples_for(edge_ms, rate), max(1, int(hop_ms * rate / 1000))
     if len(loop) < 3 * edge:
         raise fail(source, f"a loop of {len(loop) / rate * 1000:.0f} ms is too short to judge "
@@ -276,18 +365,26 @@ def scan_windows(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
                  progress: ProgressCallback | None = None) -> Scan:
     """Score every window of ``unit_ms`` (every ``hop_ms``) as a loop unit; see the module doc.
 
-    ``weights`` overrides entries of ``WEIGHTS``; ``progress`` is called after each block of
-    windows (about a second of work per 130 s of recording at 48 kHz).
+    Args:
+        x: the recording, shape (frames,), full scale ±1.
+        rate: its rate in Hz (``MIN_RATE`` to ``MAX_RATE``).
+        unit_ms, crossfade_ms, hop_ms, edge_ms: unit, wrap crossfade, scan step and head/tail
+            frame lengths in ms, each finite and positive.
+        compensate: correlation-compensated crossfade (see the module doc).
+        weights: overrides entries of ``WEIGHTS`` (dimensionless factors on dB scores).
+        source: names the signal in error messages.
+        progress: called as ``progress(done, total)`` (windows) after each block of windows
+            (about a second of work per 130 s of recording at 48 kHz).
 
     Raises:
-        RealPenError: bad lengths, a signal shorter than unit + crossfade, silence, or no
-            window clear of near-silence.
+        RealPenError: a rate out of range, bad lengths, a signal shorter than unit + crossfade,
+            silence, or no window clear of near-silence.
     """
     x = np.asarray(x, dtype=np.float64)
+    check_rate(rate)
     for name, value in (("--unit-ms", unit_ms), ("--crossfade-ms", crossfade_ms),
                         ("hop_ms", hop_ms), ("edge_ms", edge_ms)):
-        if not np.isfinite(value) or value < 0:
-            raise RealPenError(f"{name} must be a finite number ≥ 0, got {value:g}")
+        check_ms(name, value)
     length, fade, edge = (samples_for(unit_ms, rate), samples_for(crossfade_ms, rate),
                           samples_for(edge_ms, rate))
     hop = max(1, int(hop_ms * rate / 1000))
@@ -340,6 +437,8 @@ def scan_windows(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
 def _check_lengths(unit_ms, crossfade_ms, edge_ms, length, fade, edge) -> None:
     if length <= 0:
         raise RealPenError(f"--unit-ms must be positive, got {unit_ms:g}")
+    if fade <= 0:
+        raise RealPenError(f"--crossfade-ms must last at least one sample, got {crossfade_ms:g}")
     if fade >= length:
         raise RealPenError(f"--crossfade-ms must be between 0 and the unit length "
                            f"({unit_ms:g} ms), got {crossfade_ms:g}")
@@ -402,7 +501,7 @@ class LoopUnit:
     history: tuple[str, ...] = field(default_factory=tuple)
 
     def normalised(self, rms_dbfs: float = REFERENCE_DBFS) -> "LoopUnit":
-        """A copy scaled to an RMS of ``rms_dbfs`` dB re full scale."""
+        """A copy scaled to an RMS of ``rms_dbfs`` dBFS (finite, at most 0 dBFS)."""
         scaled, gain = normalise(self.samples, rms_dbfs)
         return replace(self, samples=scaled, gain=self.gain * gain)
 

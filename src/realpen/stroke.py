@@ -3,33 +3,47 @@
 The rendering follows the live app so that it can be heard (and tested) offline. Each
 trajectory row is a pen event. Its target gain is Eq. 1 of its pressure and speed, and its
 target playback rate comes from its speed. Both are held until the next event and smoothed per
-audio sample by the coupling's one-pole filter (see :mod:`realpen.coupling`). The speed of an
-event is causal: the distance from the previous event over the time between them, and 0 when
-either event has the pen lifted (pressure 0), because a touch-down has not slid yet. After the
-last event the target gain is 0, and the render runs on for five time constants so the gain can
+audio sample by the coupling's one-pole filter (see :mod:`realpen.coupling`). After the last
+event the target gain is 0, and the render runs on for five time constants so the gain can
 settle.
+
+Speed is the live page's (``SpeedMeter`` in ``live/static/pen.js``), event by event: the path
+length travelled since the newest earlier event at least ``SPEED_WINDOW_MS`` (20 ms) before
+this one, divided by the time between the two, in mm/s. While the stroke is younger than
+20 ms the window reaches back to its first event, and it always spans at least one step. A row
+with pressure 0 is the pen lifted: its speed is 0, and the next row with pressure > 0 is a
+touch-down, where the page's meter restarts (speed 0: the pen has not slid yet). A single
+step's distance would be mostly rounding on a touch screen, hence the window. (The page restarts
+its meter only at pointer-down: if a pen reports pressure 0 in the middle of a stroke, the page
+keeps measuring through it while this reading restarts. The gain there is 0 either way; only
+the speed of the next 20 ms after it can differ.)
 
 The sound is either a loop unit read cyclically at the playback rate (``mode="loop"``) or grains
 from the recording's steady part (``mode="granular"``). Either is scaled so the steady sound has
-an RMS of ``level_dbfs`` (gain 1 plays at that level).
+an RMS of ``level_dbfs`` (gain 1 plays at that level). In loop mode the recording is searched
+for its loop unit (it must last at least the unit plus the crossfade) unless it is declared a
+ready loop (``find_unit=False``, the command line's ``--as-loop``), which is played as it is.
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
 from .coupling import Coupling
-from .csvtable import read_columns
+from .csvtable import read_table
 from .errors import RealPenError, fail
 from .granular import GRAIN_MS, SteadyPart, granular, grain_samples, steady_part
 from .sound import (CROSSFADE_MS, REFERENCE_DBFS, UNIT_MS, LoopUnit, ProgressCallback,
-                    find_loop_unit, normalise, require_sound, samples_for)
+                    check_level, check_ms, check_rate, find_loop_unit, normalise, require_sound,
+                    samples_for)
 
 MODES = ("loop", "granular")
 MAX_DURATION_S = 600.0  # longer usually means t was given in ms
+SPEED_WINDOW_MS = 20.0  # the live page's speed window (SPEED_WINDOW_MS in live/static/pen.js)
 
 
 @dataclass(frozen=True)
@@ -50,24 +64,41 @@ class Trajectory:
     source: str = "trajectory"
 
     @classmethod
-    def checked(cls, t, x, y, pressure, source: object = "trajectory") -> "Trajectory":
-        """Build a trajectory, raising :class:`RealPenError` naming ``source`` on bad data."""
+    def checked(cls, t, x, y, pressure, source: object = "trajectory",
+                lines: Sequence[int] | None = None) -> "Trajectory":
+        """Build a trajectory, raising :class:`RealPenError` naming ``source`` on bad data.
+
+        Args:
+            t: time in s; x, y: position in mm; pressure: normalised, 0–1.
+            source: names the data in error messages.
+            lines: the file line of each row (1-based), when the rows come from a file:
+                errors then name the line; otherwise they name the row (1-based).
+        """
         t, x, y, pressure = (np.asarray(a, dtype=np.float64).ravel() for a in (t, x, y, pressure))
         if not len(t) == len(x) == len(y) == len(pressure):
             raise fail(source, "t, x, y and pressure differ in length")
+        if lines is not None and len(lines) != len(t):
+            raise ValueError("one line number per row is needed")
+
+        def where(row: int) -> str:
+            return f"line {lines[row]}" if lines is not None else f"row {row + 1}"
+
         if len(t) < 2:
             raise fail(source, f"a trajectory needs at least 2 rows, has {len(t)}")
         for name, values in (("t", t), ("x", x), ("y", y), ("pressure", pressure)):
-            if not np.all(np.isfinite(values)):
-                raise fail(source, f"{name} holds NaN or infinite values")
+            bad = np.flatnonzero(~np.isfinite(values))
+            if len(bad):
+                raise fail(source, f"{where(bad[0])}: {name} is {values[bad[0]]:g} (NaN or "
+                                   f"infinite)")
         steps = np.flatnonzero(np.diff(t) <= 0)
         if len(steps):
-            raise fail(source, f"t must increase strictly; data row {steps[0] + 2} has t = "
-                               f"{t[steps[0] + 1]:g} after {t[steps[0]]:g}")
+            row = steps[0] + 1
+            raise fail(source, f"{where(row)}: t = {t[row]:g} s comes after {t[row - 1]:g} s "
+                               f"({where(row - 1)}); t must increase strictly")
         outside = np.flatnonzero((pressure < 0) | (pressure > 1))
         if len(outside):
-            raise fail(source, f"data row {outside[0] + 1}: pressure "
-                               f"{pressure[outside[0]]:g} must be between 0 and 1")
+            raise fail(source, f"{where(outside[0])}: pressure {pressure[outside[0]]:g} must be "
+                               f"between 0 and 1")
         if t[-1] - t[0] > MAX_DURATION_S:
             raise fail(source, f"lasts {t[-1] - t[0]:g} s, more than {MAX_DURATION_S:g} s "
                                f"(t must be in seconds)")
@@ -78,11 +109,33 @@ class Trajectory:
         """Time from the first to the last event, in s."""
         return float(self.t[-1] - self.t[0])
 
-    def speed(self) -> np.ndarray:
-        """Causal pen speed at each event in mm/s (0 at the first event and at touch-downs)."""
-        distance = np.hypot(np.diff(self.x), np.diff(self.y))
-        sliding = (self.pressure[1:] > 0) & (self.pressure[:-1] > 0)
-        return np.concatenate([[0.0], np.where(sliding, distance / np.diff(self.t), 0.0)])
+    def speed(self, window_ms: float = SPEED_WINDOW_MS) -> np.ndarray:
+        """Causal pen speed at each event in mm/s, as the live page measures it.
+
+        The path length since the newest earlier event at least ``window_ms`` ms back (the
+        stroke's first event while the stroke is younger), over the time between the two. 0 at
+        lifted rows (pressure 0) and at touch-downs (the first row, and a row with pressure > 0
+        after a lifted one), where the page's meter restarts. See the module doc.
+
+        Args:
+            window_ms: the window in ms (default the page's 20 ms).
+        """
+        window = check_ms("window_ms", window_ms) / 1000.0
+        speed = np.zeros(len(self.t))
+        down = self.pressure > 0
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], down.astype(np.int8), [0]])))
+        for first, stop in zip(edges[::2], edges[1::2]):  # each pen-down run is one stroke
+            t = self.t[first:stop]
+            steps = np.hypot(np.diff(self.x[first:stop]), np.diff(self.y[first:stop]))
+            travelled = np.concatenate([[0.0], np.cumsum(steps)])
+            # pen.js keeps the newest point whose successor is not older than t − window:
+            # the newest earlier point with time ≤ t − window, else the stroke's first point.
+            back = np.maximum(np.searchsorted(t, t - window, side="right") - 1, 0)
+            span = t - t[back]
+            moving = span > 0
+            speed[first:stop][moving] = (travelled[moving] - travelled[back[moving]]) \
+                / span[moving]
+        return speed
 
 
 def load_trajectory(path: str | os.PathLike) -> Trajectory:
@@ -91,17 +144,26 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
     Raises:
         RealPenError: any problem with the file (see :meth:`Trajectory.checked`).
     """
-    columns = read_columns(path, ("t", "x", "y", "pressure"), min_rows=2)
-    return Trajectory.checked(columns["t"], columns["x"], columns["y"], columns["pressure"], path)
+    table = read_table(path, ("t", "x", "y", "pressure"), min_rows=2)
+    columns = table.columns
+    return Trajectory.checked(columns["t"], columns["x"], columns["y"], columns["pressure"], path,
+                              lines=table.lines)
 
 
 def control_signals(trajectory: Trajectory, coupling: Coupling,
                     rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-sample gain and playback rate of a stroke, as the live app computes them.
 
+    Args:
+        trajectory: the stroke (t in s, x and y in mm, pressure 0–1).
+        coupling: Eq. 1 constants, smoother and playback-rate law.
+        rate: audio sample rate in Hz: one control value per audio sample.
+
     Returns:
         (target gain before smoothing, smoothed gain, smoothed playback rate), each of shape
-        (frames,), covering the stroke plus five smoothing time constants.
+        (frames,) at ``rate`` Hz, covering the stroke plus five smoothing time constants. Gains
+        are linear (1 plays the steady sound at its reference level); the playback rate is in
+        source samples per output sample (1 = as recorded).
     """
     times = trajectory.t - trajectory.t[0]
     tail = int(np.ceil(5 * coupling.smoothing_ms / 1000 * rate))
@@ -141,47 +203,57 @@ class Rendered:
 
 def render_stroke(sound: np.ndarray, rate: float, trajectory: Trajectory,
                   coupling: Coupling | None = None, mode: str = "loop", *,
-                  find_unit: bool | None = None, unit_ms: float = UNIT_MS,
+                  find_unit: bool = True, unit_ms: float = UNIT_MS,
                   crossfade_ms: float = CROSSFADE_MS, grain_ms: float = GRAIN_MS,
                   seed: int = 0, level_dbfs: float = REFERENCE_DBFS,
                   source: object = "sound", progress: ProgressCallback | None = None) -> Rendered:
     """Render the friction sound of a stroke.
 
     Args:
-        sound: a loop unit or a recording, mono, at ``rate`` Hz.
-        rate: its rate in Hz (also the output rate).
+        sound: a recording (or, with ``find_unit=False``, a ready loop), mono, full scale ±1,
+            at ``rate`` Hz.
+        rate: its rate in Hz (also the output rate), 8 kHz to 384 kHz.
         trajectory: the stroke.
         coupling: Eq. 1 parameters (default :class:`Coupling`).
         mode: ``"loop"`` or ``"granular"``.
-        find_unit: loop mode: search the loop unit first (True) or play ``sound`` as a ready
-            loop (False); None decides by length (longer than two units: a recording).
-        unit_ms, crossfade_ms: loop-unit search parameters.
-        grain_ms, seed: granular parameters.
-        level_dbfs: RMS in dB re full scale that gain 1 plays the steady sound at.
+        find_unit: loop mode: search the recording for its loop unit (default; the recording
+            must last at least ``unit_ms + crossfade_ms``), or False to play ``sound`` as it is
+            as a ready loop (e.g. a WAV written by ``realpen sound loop``).
+        unit_ms, crossfade_ms: loop-unit length and wrap crossfade in ms (finite, positive).
+        grain_ms: granular grain length in ms (finite, positive); seed: seed of its offsets.
+        level_dbfs: RMS in dB re full scale that gain 1 plays the steady sound at (finite,
+            at most 0 dBFS).
         source: names the sound in error messages.
         progress: passed to the loop-unit search.
 
     Raises:
-        RealPenError: a bad mode, silence, or a sound too short for the unit or the grains.
+        RealPenError: a bad mode, rate, length or level, silence, or a sound too short for the
+            unit or the grains.
     """
     coupling = coupling or Coupling()
     if mode not in MODES:
         raise RealPenError(f"--mode: unknown mode '{mode}' (choose from {', '.join(MODES)})")
+    check_rate(rate)
+    for name, value in (("--unit-ms", unit_ms), ("--crossfade-ms", crossfade_ms),
+                        ("--grain-ms", grain_ms)):
+        check_ms(name, value)
+    check_level(level_dbfs)
     sound = np.asarray(sound, dtype=np.float64)
     require_sound(sound, source)
+    needed = samples_for(unit_ms, rate) + samples_for(crossfade_ms, rate)
+    if mode == "loop" and find_unit and len(sound) < needed:
+        raise fail(source, f"lasts {len(sound) / rate * 1000:.0f} ms, shorter than the "
+                           f"{unit_ms:g} ms unit plus the {crossfade_ms:g} ms crossfade it is "
+                           f"searched for (give --as-loop to play the file as a ready loop)")
     target, gain, playback = control_signals(trajectory, coupling, rate)
     unit = part = None
     if mode == "loop":
-        if find_unit is None:
-            find_unit = np.isfinite(unit_ms) and len(sound) > 2 * samples_for(unit_ms, rate)
         if find_unit:
             unit = find_loop_unit(sound, rate, unit_ms, crossfade_ms, source=source,
                                   progress=progress)
         loop, _ = normalise(unit.samples if unit else sound, level_dbfs)
         carrier = _read_cyclic(loop, playback)
     else:
-        if not np.isfinite(grain_ms) or grain_ms <= 0:
-            raise RealPenError(f"--grain-ms must be positive, got {grain_ms:g}")
         grain = grain_samples(grain_ms, rate)
         span_ms = (np.ceil(grain * coupling.rate_max) + 2) * 1000 / rate
         part = steady_part(sound, rate, span_ms, source=source)

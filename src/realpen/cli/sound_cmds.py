@@ -5,13 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 
 from ..coupling import FIXABLE, Coupling, fit_coupling, load_measurements
-from ..errors import RealPenError
-from ..fileio import write_json, write_wav
-from ..granular import GRAIN_MS, LENGTH_MS, granular_loop
-from ..sound import CROSSFADE_MS, DEFAULT_RATE, REFERENCE_DBFS, UNIT_MS, find_loop_unit, load_sound
+from ..errors import RealPenError, fail
+from ..fileio import json_text, wav_bytes, write_files
+from ..granular import GRAIN_MS, LENGTH_MS, MAX_LENGTH_MS, granular_loop
+from ..sound import (CROSSFADE_MS, DEFAULT_RATE, MAX_RATE, MIN_RATE, REFERENCE_DBFS, UNIT_MS,
+                     check_level, check_ms, find_loop_unit, load_sound)
 from ..stroke import MODES, load_trajectory, render_stroke
 from . import app
 from .common import console, progress_bar
@@ -24,8 +26,14 @@ sound_app = typer.Typer(
 app.add_typer(sound_app, name="sound")
 
 MODE_HELP = "loop (one seamless unit) | granular (overlapping grains, no repetition)."
-RATE_HELP = "Resample the sound to this rate in Hz."
-LEVEL_HELP = "RMS in dBFS of the steady sound (the level coupling gain 1 plays at)."
+RATE_HELP = (f"Resample the sound to this rate in Hz ({MIN_RATE:g} to {MAX_RATE:g}; lower rates "
+             f"leave too little band to judge the seam).")
+LEVEL_HELP = ("RMS in dBFS of the steady sound (the level coupling gain 1 plays at); finite, at "
+              "most 0.")
+UNIT_HELP = ("Loop unit length in ms (positive); the recording must last the unit plus the "
+             "crossfade.")
+CROSSFADE_HELP = "Crossfade at the wrap in ms (positive, shorter than the unit)."
+GRAIN_HELP = "Granular mode: grain length in ms (positive)."
 PROGRESS_AFTER_S = 60.0  # the scan takes about a second per 130 s of recording
 
 
@@ -35,24 +43,48 @@ def _check_mode(mode: str) -> str:
     return mode
 
 
+def _check_targets(*targets: Optional[Path]) -> None:
+    """Refuse one file given for two outputs, before any work is done."""
+    given = [target for target in targets if target is not None]
+    for index, target in enumerate(given):
+        for other in given[:index]:
+            if target.resolve() == other.resolve():
+                raise fail(target, "given for two outputs; name a different file for each")
+
+
+def _json_bytes(data: object, target: Path) -> bytes:
+    """Indented UTF-8 JSON of ``data``, built before anything is written; NaN or infinity is a
+    one-line error naming ``target`` (``json.dumps(allow_nan=False)`` in :func:`json_text`)."""
+    return json_text(data, target).encode("utf-8")
+
+
 @sound_app.command("loop")
 def loop(
     recording: Path = typer.Argument(..., help="Friction-sound recording: WAV, FLAC or OGG."),
     output: Path = typer.Option(..., "-o", "--output", help="Loop WAV to write."),
-    unit_ms: float = typer.Option(UNIT_MS, "--unit-ms", help="Loop unit length in ms."),
-    crossfade_ms: float = typer.Option(CROSSFADE_MS, "--crossfade-ms",
-                                       help="Crossfade at the wrap in ms."),
+    unit_ms: float = typer.Option(UNIT_MS, "--unit-ms", help=UNIT_HELP),
+    crossfade_ms: float = typer.Option(CROSSFADE_MS, "--crossfade-ms", help=CROSSFADE_HELP),
     mode: str = typer.Option("loop", "--mode", help=MODE_HELP),
-    length_ms: float = typer.Option(LENGTH_MS, "--length-ms",
-                                    help="Granular mode: length of the looping texture in ms."),
-    grain_ms: float = typer.Option(GRAIN_MS, "--grain-ms", help="Granular mode: grain in ms."),
+    length_ms: float = typer.Option(
+        LENGTH_MS, "--length-ms",
+        help=f"Granular mode: length of the looping texture in ms (at most {MAX_LENGTH_MS:g}, "
+             f"i.e. {MAX_LENGTH_MS / 1000:g} s)."),
+    grain_ms: float = typer.Option(GRAIN_MS, "--grain-ms", help=GRAIN_HELP),
     seed: int = typer.Option(0, "--seed", help="Granular mode: seed of the grain offsets."),
     rate: float = typer.Option(DEFAULT_RATE, "--rate", help=RATE_HELP),
     level_dbfs: float = typer.Option(REFERENCE_DBFS, "--level-dbfs", help=LEVEL_HELP),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the report as JSON."),
 ) -> None:
-    """Cut the most seamless loop unit from a recording (or build a granular texture)."""
+    """Cut the most seamless loop unit from a recording (or build a granular texture).
+
+    Refuses a recording shorter than unit + crossfade; WAV and JSON are written both or neither.
+    """
     _check_mode(mode)
+    for name, value in (("--unit-ms", unit_ms), ("--crossfade-ms", crossfade_ms),
+                        ("--length-ms", length_ms), ("--grain-ms", grain_ms)):
+        check_ms(name, value)
+    check_level(level_dbfs)
+    _check_targets(output, json_out)
     sound = load_sound(recording, rate)
     if mode == "loop":
         with progress_bar("scanning", sound.duration > PROGRESS_AFTER_S) as progress:
@@ -65,10 +97,10 @@ def loop(
                                source=recording, recording=sound)
         steady = sum(b - a for a, b in result.part.stretches) / sound.rate
         where = f"grains from {steady:.2f} s of steady sound"
-    report = result.to_json()
-    write_wav(output, result.samples, int(round(result.rate)))
+    files = {output: wav_bytes(result.samples, int(round(result.rate)))}
     if json_out is not None:
-        write_json(json_out, report)
+        files[json_out] = _json_bytes(result.to_json(), json_out)
+    write_files(files)
     seam = result.seam
     console.print(f"wrote {output}: {len(result.samples) / result.rate * 1000:.0f} ms {mode} at "
                   f"{result.rate:g} Hz, {where}; seam: level jump {seam.level_jump_db:.2f} dB, "
@@ -89,27 +121,38 @@ def render(
     mode: str = typer.Option("loop", "--mode", help=MODE_HELP),
     find_unit: Optional[bool] = typer.Option(
         None, "--find-unit/--as-loop",
-        help="Loop mode: search the unit first, or play the file as a ready loop "
-             "(default: search when the file is longer than two units)."),
-    unit_ms: float = typer.Option(UNIT_MS, "--unit-ms", help="Loop unit length in ms."),
-    crossfade_ms: float = typer.Option(CROSSFADE_MS, "--crossfade-ms",
-                                       help="Crossfade at the wrap in ms."),
-    grain_ms: float = typer.Option(GRAIN_MS, "--grain-ms", help="Granular mode: grain in ms."),
+        help="Loop mode: search the recording for its loop unit (the default; a file shorter "
+             "than the unit plus the crossfade is then refused), or play the file as it is as "
+             "a ready loop (e.g. a WAV written by 'realpen sound loop')."),
+    unit_ms: float = typer.Option(UNIT_MS, "--unit-ms", help=UNIT_HELP),
+    crossfade_ms: float = typer.Option(CROSSFADE_MS, "--crossfade-ms", help=CROSSFADE_HELP),
+    grain_ms: float = typer.Option(GRAIN_MS, "--grain-ms", help=GRAIN_HELP),
     seed: int = typer.Option(0, "--seed", help="Granular mode: seed of the grain offsets."),
     rate: float = typer.Option(DEFAULT_RATE, "--rate", help=RATE_HELP),
     level_dbfs: float = typer.Option(REFERENCE_DBFS, "--level-dbfs", help=LEVEL_HELP),
 ) -> None:
-    """Render what a stroke sounds like, with the pressure/speed coupling."""
+    """Render what a stroke sounds like, with the pressure/speed coupling.
+
+    Loop mode searches the sound for its unit; --as-loop plays a ready loop file as it is.
+    """
     _check_mode(mode)
+    if mode != "loop" and find_unit is not None:
+        raise RealPenError("--find-unit/--as-loop: only for --mode loop")
+    for name, value in (("--unit-ms", unit_ms), ("--crossfade-ms", crossfade_ms),
+                        ("--grain-ms", grain_ms)):
+        check_ms(name, value)
+    check_level(level_dbfs)
     coupling = Coupling.load(coupling_path) if coupling_path is not None else Coupling()
     trajectory = load_trajectory(trajectory_path)
     sound = load_sound(sound_path, rate)
     with progress_bar("scanning", sound.duration > PROGRESS_AFTER_S) as progress:
         rendered = render_stroke(sound.mono, sound.rate, trajectory, coupling, mode,
-                                 find_unit=find_unit, unit_ms=unit_ms, crossfade_ms=crossfade_ms,
-                                 grain_ms=grain_ms, seed=seed, level_dbfs=level_dbfs,
-                                 source=sound_path, progress=progress)
-    write_wav(output, rendered.samples, int(round(rendered.rate)))
+                                 find_unit=find_unit is not False, unit_ms=unit_ms,
+                                 crossfade_ms=crossfade_ms, grain_ms=grain_ms, seed=seed,
+                                 level_dbfs=level_dbfs, source=sound_path, progress=progress)
+    if not np.all(np.isfinite(rendered.samples)):
+        raise fail(output, "the rendered sound holds NaN or infinite samples; not written")
+    write_files({output: wav_bytes(rendered.samples, int(round(rendered.rate)))})
     source = (f"unit at {rendered.unit.start_s:.3f} s" if rendered.unit is not None
               else "grains" if mode == "granular" else "the file as a loop")
     console.print(f"wrote {output}: {len(rendered.samples) / rendered.rate:.2f} s at "
@@ -124,22 +167,27 @@ def fit(
     output: Path = typer.Option(..., "-o", "--output", help="Coupling JSON to write."),
     fix: str = typer.Option("c_ov", "--fix", help="Threshold held fixed: c_ov or c_op "
                                                   "(only their weighted sum is identifiable)."),
-    value: Optional[float] = typer.Option(None, "--value",
-                                          help="Its value (default: the default constant)."),
+    value: Optional[float] = typer.Option(
+        None, "--value", help="Its value, finite (default: the base coupling's; c_ov in mm/s, "
+                              "c_op in normalised pressure)."),
     base_path: Optional[Path] = typer.Option(None, "--base", help="Coupling JSON supplying "
                                              "a_max, smoothing and playback rate."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write a fit report as JSON."),
 ) -> None:
-    """Fit c_p, c_op, c_x, c_ov of Eq. 1 to measurements by least squares."""
+    """Fit c_p, c_op, c_x, c_ov of Eq. 1 to measurements by least squares.
+
+    The coupling JSON and the report are written together or not at all.
+    """
     if fix not in FIXABLE:
         raise RealPenError(f"--fix: choose from {', '.join(FIXABLE)}, got '{fix}'")
+    _check_targets(output, json_out)
     base = Coupling.load(base_path) if base_path is not None else Coupling()
     pressure, speed, amplitude = load_measurements(measurements)
     result = fit_coupling(pressure, speed, amplitude, fix, value, base, source=measurements)
-    report = result.to_json()
-    result.coupling.save(output)
+    files = {output: _json_bytes(result.coupling.to_json(), output)}
     if json_out is not None:
-        write_json(json_out, report)
+        files[json_out] = _json_bytes(result.to_json(), json_out)
+    write_files(files)
     c = result.coupling
     console.print(f"wrote {output}: c_p={c.c_p:.4g}, c_op={c.c_op:.4g}, c_x={c.c_x:.4g} per mm/s, "
                   f"c_ov={c.c_ov:.4g} mm/s ({fix} held); {result.rows} rows, rmse "
