@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RealPenError, fail
+from .csvtable import is_number
 from .fileio import sha256_of
 
 MODEL_DEFAULTS = {"lra": {"f0": 175.0, "q": 8.0}, "piezo": {"f0": 300.0, "q": 2.0}, "flat": {}}
@@ -145,7 +146,7 @@ def load_measured(path: str | Path) -> Actuator:
     if not rows:
         raise fail(path, "file is empty")
     in_db = False
-    if not _is_number(rows[0][0]):
+    if not is_number(rows[0][0]):
         in_db = len(rows[0]) > 1 and re.search(r"db", rows[0][1], re.IGNORECASE) is not None
         rows = rows[1:]
     if len(rows) < 2:
@@ -167,13 +168,6 @@ def load_measured(path: str | Path) -> Actuator:
         raise fail(path, "response magnitudes must be positive (give dB in a column named dB)")
     return Actuator(str(path), "measured", {}, hz, response)
 
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def weighting(actuator: Actuator, frequencies_hz: np.ndarray, band_hz: tuple[float, float],

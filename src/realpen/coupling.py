@@ -47,7 +47,7 @@ from scipy import optimize, signal
 
 from .csvtable import read_table
 from .errors import RealPenError, fail
-from .fileio import write_json
+from .fileio import check_readable_file, write_json
 
 FORMAT = "realpen.coupling/1"
 FIXABLE = ("c_ov", "c_op")
@@ -129,12 +129,7 @@ class Coupling(BaseModel):
     def load(cls, path: str | os.PathLike) -> "Coupling":
         """Load a coupling JSON file."""
         path = Path(path)
-        if not path.exists():
-            raise fail(path, "no such file")
-        if path.is_dir():
-            raise fail(path, "is a folder, not a file")
-        if path.stat().st_size == 0:
-            raise fail(path, "file is empty")
+        check_readable_file(path)
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
         except UnicodeDecodeError:

@@ -14,6 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import fail
+from .fileio import check_readable_file
 
 
 @dataclass(frozen=True)
@@ -60,12 +61,7 @@ def read_table(path: str | os.PathLike, required: Sequence[str], min_rows: int =
             NaN or infinite values; fewer than ``min_rows`` rows.
     """
     path = Path(path)
-    if not path.exists():
-        raise fail(path, "no such file")
-    if path.is_dir():
-        raise fail(path, "is a folder, not a file")
-    if path.stat().st_size == 0:
-        raise fail(path, "file is empty")
+    check_readable_file(path)
     try:
         text = path.read_text(encoding="utf-8-sig")  # universal newlines: \r\n and \r become \n
     except UnicodeDecodeError:
@@ -109,3 +105,12 @@ def read_table(path: str | os.PathLike, required: Sequence[str], min_rows: int =
             values[position, column] = value
     return Table(columns={name.lower(): values[:, column] for column, name in enumerate(required)},
                  lines=np.array([number for number, _ in data], dtype=np.int64))
+
+
+def is_number(text: str) -> bool:
+    """Whether ``text`` parses as a float (a CSV cell that is a value, not a name)."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

@@ -58,6 +58,17 @@ def json_text(data: object, source: object = "JSON") -> str:
         raise fail(source, "result holds NaN or infinite numbers; check the parameters") from None
 
 
+def check_readable_file(path: str | os.PathLike) -> None:
+    """Raise a one-line :class:`RealPenError` unless ``path`` is an existing, non-empty file."""
+    path = Path(path)
+    if not path.exists():
+        raise fail(path, "no such file")
+    if path.is_dir():
+        raise fail(path, "is a folder, not a file")
+    if path.stat().st_size == 0:
+        raise fail(path, "file is empty")
+
+
 def current_umask() -> int:
     """The process's file-creation mask."""
     mask = os.umask(0)

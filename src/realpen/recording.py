@@ -24,7 +24,8 @@ from scipy import signal
 from scipy.interpolate import CubicSpline
 
 from .errors import RealPenError, fail, require_number
-from .fileio import atomic_path, sha256_of
+from .csvtable import is_number
+from .fileio import atomic_path, check_readable_file, sha256_of
 
 TIME_COLUMNS = ("t", "time", "timestamp")
 AXIS_CHOICES = ("dft321", "x", "y", "z", "magnitude")
@@ -82,16 +83,6 @@ def _check_finite(samples: np.ndarray, source: str) -> None:
     if bad.any():
         first = int(np.argwhere(bad)[0][0])
         raise fail(source, f"contains NaN or infinite values (first at frame {first})")
-
-
-def check_readable_file(path: Path) -> None:
-    """Raise a one-line :class:`RealPenError` unless ``path`` is an existing, non-empty file."""
-    if not path.exists():
-        raise fail(path, "no such file")
-    if path.is_dir():
-        raise fail(path, "is a folder, not a file")
-    if path.stat().st_size == 0:
-        raise fail(path, "file is empty")
 
 
 def load_recording(path: str | os.PathLike, rate: float | None = None,
@@ -195,7 +186,7 @@ def _load_csv(path: Path, rate: float | None, rate_option: str = "--rate") -> Re
         dialect = csv.excel
     rows = list(csv.reader(io.StringIO("\n".join(line for _, line in lines)), dialect))
     header = [name.strip() for name in rows[0]]
-    if all(_is_number(name) for name in header):
+    if all(is_number(name) for name in header):
         raise fail(path, "CSV needs a header row naming its columns (the first row is numbers)")
     values = []
     for (number, _), row in zip(lines[1:], rows[1:]):
@@ -240,14 +231,6 @@ def _even_sampling(path: Path, name: str, times: np.ndarray, values: np.ndarray
         return 1.0 / step, values
     grid = times[0] + np.arange(int(np.floor((times[-1] - times[0]) / step)) + 1) * step
     return 1.0 / step, CubicSpline(times, values, axis=0)(grid)
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def _load_npz(path: Path, rate: float | None, rate_option: str = "--rate") -> Recording:

@@ -30,7 +30,8 @@ from scipy import signal
 
 from ..errors import fail
 from ..fileio import sha256_of
-from ..recording import Recording, check_readable_file
+from ..fileio import check_readable_file
+from ..recording import Recording
 
 
 @dataclass(frozen=True, eq=False)
