@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import re
 import select
@@ -14,7 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
-from realpen.profile import resolve_profile
+import numpy as np
+
+from realpen.exports.base import resample_loop
+from realpen.fileio import wav_bytes
+from realpen.profile import PenProfile, resolve_profile, save_profile
 
 URL_LINE = re.compile(r"RealPen live: (http://\S+)")
 
@@ -28,6 +33,11 @@ class Served:
     token: str | None
     process: subprocess.Popen
     output: list[str]
+    stderr: Path | None = None
+
+    def errors(self) -> str:
+        """What the server wrote to stderr (when started with ``stderr_to``)."""
+        return self.stderr.read_text() if self.stderr else ""
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 20) -> str:
         """Send ``sig``, wait for exit, return the rest of stdout."""
@@ -39,13 +49,18 @@ class Served:
 
 
 @contextlib.contextmanager
-def serve(tmp_path: Path, *args: str, timeout: float = 30) -> Iterator[Served]:
-    """Run ``realpen serve --port 0 --store tmp/strokes.sqlite3 ARGS`` until the block ends."""
+def serve(tmp_path: Path, *args: str, timeout: float = 30,
+          stderr_to: Path | None = None) -> Iterator[Served]:
+    """Run ``realpen serve --port 0 --store tmp/strokes.sqlite3 ARGS`` until the block ends.
+
+    stderr goes with stdout, or to the file ``stderr_to`` (:meth:`Served.errors`).
+    """
     env = {**os.environ, "REALPEN_HOME": str(tmp_path / "home"), "PYTHONUNBUFFERED": "1"}
     store = [] if "--store" in args else ["--store", str(tmp_path / "strokes.sqlite3")]
     command = [sys.executable, "-m", "realpen.cli", "serve", "--port", "0", *store, *args]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                               text=True, env=env)
+    errors = open(stderr_to, "w") if stderr_to else None
+    process = subprocess.Popen(command, stdout=subprocess.PIPE,
+                               stderr=errors if errors else subprocess.STDOUT, text=True, env=env)
     lines: list[str] = []
     deadline = time.monotonic() + timeout
     match = None
@@ -61,7 +76,7 @@ def serve(tmp_path: Path, *args: str, timeout: float = 30) -> Iterator[Served]:
                 match = URL_LINE.search(line)
         url = match.group(1)
         token = url.split("?token=")[1] if "?token=" in url else None
-        served = Served(url, url.split("?")[0], token, process, lines)
+        served = Served(url, url.split("?")[0], token, process, lines, stderr_to)
         yield served
     finally:
         if process.poll() is None:
@@ -71,6 +86,21 @@ def serve(tmp_path: Path, *args: str, timeout: float = 30) -> Iterator[Served]:
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.communicate()
+        if errors:
+            errors.close()
+
+
+def low_rate_profile(folder: Path, name: str = "slowpen", rate: int = 2000) -> Path:
+    """Save a copy of the pencil whose tactile pattern is at ``rate`` Hz (like ``realpen profile
+    build --rate 2000``): below the 3 kHz that browsers' decodeAudioData accepts."""
+    pencil = resolve_profile("pencil")
+    tactile = resample_loop(pencil.tactile, pencil.meta.tactile.rate, rate)
+    tactile = (tactile / np.max(np.abs(tactile))).astype(np.float32)
+    section = pencil.meta.tactile.model_copy(update={
+        "rate": rate, "frames": len(tactile),
+        "sha256": hashlib.sha256(wav_bytes(tactile, rate)).hexdigest()})
+    meta = pencil.meta.model_copy(update={"name": name, "tool": "slow pen", "tactile": section})
+    return save_profile(PenProfile(meta, tactile, pencil.sound), folder / name)
 
 
 def stroke_messages(pen: str = "pencil", stroke: int = 1, modality: str = "auditory-tactile",

@@ -21,9 +21,11 @@ with warnings.catch_warnings():  # starlette's note about a future httpx success
     from fastapi.testclient import TestClient  # noqa: E402
 
 from conftest import assert_clean_failure, run_cli  # noqa: E402
-from live_support import serve, stroke_messages  # noqa: E402
+from live_support import low_rate_profile, serve, stroke_messages  # noqa: E402
 from realpen.errors import RealPenError  # noqa: E402
+from realpen.exports.base import resample_loop  # noqa: E402
 from realpen.live.app import LiveSettings, create_app  # noqa: E402
+from realpen.live.catalog import MIN_WAV_RATE, playable_rate, playable_wav  # noqa: E402
 from realpen.live.messages import MAX_MESSAGE_BYTES, MessageError, parse_message  # noqa: E402
 from realpen.live.store import CSV_COLUMNS, StrokeStore, export_csv  # noqa: E402
 from realpen.profile import load_profile, resolve_profile, save_profile  # noqa: E402
@@ -103,6 +105,49 @@ def test_extra_profiles_folder_and_a_broken_bundle(tmp_path, monkeypatch):
     assert load_profile(extra / "fountain").name == "fountain"
     with pytest.raises(RealPenError, match="no such folder"):
         create_app(LiveSettings(store=tmp_path / "s.sqlite3", profiles=[tmp_path / "nope"]))
+
+
+def test_tactile_below_3_khz_is_served_at_a_rate_browsers_decode(tmp_path, monkeypatch):
+    """Chrome's decodeAudioData refuses WAVs below 3 kHz: a 2 kHz tactile pattern is served
+    resampled (as a loop) to the sound's rate, and the profile itself is unchanged."""
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    slow = load_profile(low_rate_profile(tmp_path / "low"))
+    app = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3",
+                                           profiles=[tmp_path / "low"]))
+    with TestClient(app, base_url=LOCAL) as client:
+        (entry,) = [p for p in client.get("/api/profiles").json()["profiles"]
+                    if p["name"] == "slowpen"]
+        sound_rate = slow.meta.sound.rate
+        assert entry["tactile"]["rate"] == 2000 and entry["tactile"]["frames"] == 3000
+        assert entry["tactile"]["wav_rate"] == sound_rate
+        assert entry["sound"]["wav_rate"] == sound_rate
+        tactile, rate = sf.read(io.BytesIO(client.get(f"/{entry['tactile']['url']}").content),
+                                dtype="float64")
+        assert rate == sound_rate >= MIN_WAV_RATE and len(tactile) == 3000 * sound_rate // 2000
+        expected = resample_loop(slow.tactile, 2000, sound_rate)
+        expected /= max(1.0, np.max(np.abs(expected)))  # the filter's overshoot: back to peak 1
+        assert np.allclose(tactile, expected, atol=1e-6)
+        assert 0.99 < np.max(np.abs(tactile)) <= 1.0
+        # Still a seamless loop: the step across the wrap is like the steps inside.
+        steps = np.abs(np.diff(np.concatenate([tactile, tactile[:1]])))
+        assert steps[-1] <= 1.01 * steps[:-1].max()
+        sound, rate = sf.read(io.BytesIO(client.get(f"/{entry['sound']['url']}").content),
+                              dtype="float32")
+        assert rate == sound_rate and np.array_equal(sound, slow.sound)
+    # The bundled pens (8 kHz) are served as they are (test_page_config_and_profiles).
+    assert app.state.live.catalog.get("pencil").tactile_rate == 8000
+
+
+def test_playable_rates_keep_a_whole_number_of_samples():
+    assert playable_rate(12000, 8000, 48000) == 8000  # at or above 3 kHz: unchanged
+    assert playable_rate(3000, 2000, 48000) == 48000  # the sound's rate when the loop fits
+    assert playable_rate(3001, 2001, 48000) == 4002  # else a whole multiple of its own rate
+    assert playable_rate(100, 1000, 2000) == 3000
+    assert playable_rate(7, 2999, 44100) == 5998
+    period = np.sin(2 * np.pi * 5 * np.arange(3001) / 3001)  # 5 cycles: a seamless loop
+    samples, rate = sf.read(io.BytesIO(playable_wav(period, 2001, 48000, "test")), dtype="float64")
+    assert rate == 4002 and len(samples) == 6002
+    assert np.allclose(samples, np.sin(2 * np.pi * 5 * np.arange(6002) / 6002), atol=5e-3)
 
 
 def test_host_header_must_be_loopback(client):
@@ -204,6 +249,41 @@ def test_oversized_binary_and_unknown_pen_messages(client):
         assert talk(ws, {"type": "pen_up", "seq": 6, "stroke": 1, "t": 10.1})["type"] == "ack"
 
 
+@pytest.mark.parametrize("message, field", [
+    ({"type": "hello", "seq": True, "client": "x"}, "seq"),
+    ({"type": "hello", "seq": "3", "client": "x"}, "seq"),
+    ({"type": "hello", "seq": 1.0, "client": "x"}, "seq"),
+    ({"type": "hello", "seq": 1, "client": 7}, "client"),
+    ({"type": "gain", "seq": 1, "stroke": True, "t": 0, "target": 1}, "stroke"),
+    ({"type": "gain", "seq": 1, "stroke": 1, "t": "0", "target": 1}, "t"),
+    ({"type": "gain", "seq": 1, "stroke": 1, "t": 0, "target": False}, "target"),
+    ({"type": "samples", "seq": 1, "stroke": 1, "samples": [
+        {"t": 0, "x": 0, "y": 0, "pressure": "0.5", "speed": 0}]}, "pressure"),
+    ({"type": "pen_up", "seq": 1, "stroke": "1", "t": 0}, "stroke"),
+])
+def test_message_types_are_strict(message, field):
+    """No coercion: true is not seq 1, "0.5" is not a pressure, "1" is not a stroke."""
+    with pytest.raises(MessageError) as caught:
+        parse_message(json.dumps(message))
+    assert caught.value.code == "invalid_message" and field in caught.value.message
+    if isinstance(message["seq"], int) and not isinstance(message["seq"], bool):
+        assert caught.value.seq == message["seq"]
+    else:
+        assert caught.value.seq is None
+
+
+def test_strict_pen_down_takes_only_real_booleans(client):
+    down = stroke_messages("pencil", n=1)[0]
+    with client.websocket_connect(WS) as ws:
+        reply = talk(ws, {"type": "hello", "seq": True, "client": "x"})
+        assert reply["type"] == "error" and reply["code"] == "invalid_message"
+        assert "seq" not in reply  # never acked as seq 1
+        for calibrated in (1, "true"):
+            reply = talk(ws, {**down, "calibrated": calibrated})
+            assert reply["code"] == "invalid_message" and "calibrated" in reply["message"]
+        assert talk(ws, {**down, "px_per_mm": 4})["type"] == "ack"  # a JSON integer is a number
+
+
 def test_parse_message_limits():
     with pytest.raises(MessageError) as caught:
         parse_message("x" * 10, limit=5)
@@ -246,6 +326,30 @@ def test_disconnect_and_new_pen_down_end_the_open_stroke(client, store_path):
 
 
 # ---- the store and its export ----------------------------------------------------------------
+
+def test_store_in_a_place_it_cannot_be_made(tmp_path):
+    blocker = tmp_path / "f"
+    blocker.write_text("a file")
+    for path in (blocker / "x.sqlite3", "/proc/x.sqlite3", tmp_path):
+        with pytest.raises(RealPenError, match=f"^{path}: ") as caught:
+            StrokeStore(path)
+        assert "\n" not in str(caught.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]
+
+
+def test_discard_removes_only_a_new_empty_store(tmp_path):
+    new = StrokeStore(tmp_path / "new.sqlite3")
+    new.discard()
+    assert list(tmp_path.iterdir()) == []
+    kept = StrokeStore(tmp_path / "kept.sqlite3")
+    kept.begin_stroke(session="s", page_stroke=1, pen="pencil", profile_version="0" * 12,
+                      modality="none", ink="visible", pointer_type="pen", px_per_mm=4.0,
+                      calibrated=False, page_t0=0.0)
+    kept.discard()
+    again = StrokeStore(tmp_path / "kept.sqlite3")  # it existed: never removed
+    again.discard()
+    assert StrokeStore(tmp_path / "kept.sqlite3").count() == (1, 0)
+
 
 def test_store_reopens_and_refuses_other_files(tmp_path):
     path = tmp_path / "s.sqlite3"
@@ -291,6 +395,28 @@ def test_strokes_export_cli(client, store_path, tmp_path):
                                  "-o", out), "no such stroke store")
     assert_clean_failure(run_cli("strokes", "export", "--store", store_path, "-o", out,
                                  "--stroke", "999"), "no stroke with id 999")
+
+
+def test_strokes_export_to_a_place_it_cannot_write(client, store_path, tmp_path):
+    with client.websocket_connect(WS) as ws:
+        for message in stroke_messages("pencil", n=3):
+            talk(ws, message)
+    folder = tmp_path / "somedir"
+    folder.mkdir()
+    (folder / "keep.txt").write_text("x")
+    blocker = tmp_path / "f"
+    blocker.write_text("a file, not a folder")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    for output, words in ((folder, "somedir"), (blocker / "x.csv", "f/x.csv"),
+                          ("/proc/x.csv", "/proc/x.csv")):
+        assert_clean_failure(run_cli("strokes", "export", "--store", store_path, "-o", output),
+                             words)
+    assert_clean_failure(run_cli("strokes", "export", "--store", store_path, "-o", store_path),
+                         "stroke store itself")
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing half-written
+    assert [p.name for p in folder.iterdir()] == ["keep.txt"]
+    assert blocker.read_text() == "a file, not a folder"
+    assert rows(store_path, "SELECT COUNT(*) FROM samples") == [(3,)]
 
 
 # ---- a real server: tokens, sizes, options, Ctrl-C -------------------------------------------
@@ -386,7 +512,43 @@ def test_serve_refuses_bad_options(tmp_path):
                              f"--port {port}")
     bogus = tmp_path / "bogus.sqlite3"
     bogus.write_text("not sqlite")
-    assert_clean_failure(run_cli("serve", "--store", bogus), "not a RealPen stroke store")
+    assert_clean_failure(run_cli("serve", "--port", "0", "--store", bogus),
+                         "not a RealPen stroke store")
+
+
+def test_serve_store_errors_are_one_line_and_leave_nothing(tmp_path):
+    blocker = tmp_path / "f"
+    blocker.write_text("a file")
+    for store in ("/proc/x.sqlite3", blocker / "x.sqlite3"):
+        assert_clean_failure(run_cli("serve", "--port", "0", "--store", store), str(store))
+    new = tmp_path / "new.sqlite3"
+    with socket.socket() as taken:  # the port is refused before the store is made
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        assert_clean_failure(run_cli("serve", "--port", port, "--store", new), f"--port {port}")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]  # no new.sqlite3, -wal, -shm
+
+
+def broken_profiles(tmp_path):
+    extra = tmp_path / "pens"
+    (extra / "broken").mkdir(parents=True)
+    (extra / "broken" / "profile.json").write_text("{not json")
+    return extra
+
+
+def test_a_skipped_profile_is_reported_once_on_stdout(tmp_path):
+    extra = broken_profiles(tmp_path)
+    with serve(tmp_path, "--profiles", str(extra), stderr_to=tmp_path / "stderr.txt") as server:
+        assert httpx.get(server.base + "api/status").status_code == 200  # serving
+        output = server.stop()
+        errors = server.errors()
+    assert errors == "", errors
+    skipped = [line for line in output.splitlines() if "broken" in line]
+    assert len(skipped) == 1 and skipped[0].startswith("  skipped profile: ")
+    # With a later error, stderr holds that error's one line and nothing about the profile.
+    assert_clean_failure(run_cli("serve", "--port", "0", "--profiles", extra, "--store",
+                                 "/proc/x.sqlite3"), "/proc/x.sqlite3")
 
 
 def test_serve_prints_url_and_tactile_setting(tmp_path):

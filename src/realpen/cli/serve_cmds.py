@@ -67,31 +67,39 @@ def serve(
     token = new_token() if lan else None
     settings = LiveSettings(store=store, profiles=list(profiles), tactile=tactile, token=token,
                             allowed_hosts=None if lan else LOOPBACK_HOSTS)
-    live_app = create_app(settings)
+    # The port first: a port in use is refused before the profiles load and the store opens.
     sock = bind(host, port)
-    port = sock.getsockname()[1]
-    query = f"?token={token}" if token else ""
-    shown = lan_address() if lan and host in ("0.0.0.0", "::") else host
-    print(f"RealPen live: http://{url_host(shown)}:{port}/{query}", flush=True)
-    if lan:
-        print(f"  (open it on the tablet; on this machine: http://127.0.0.1:{port}/{query})",
-              flush=True)
+    try:
+        live_app = create_app(settings)
+    except BaseException:
+        sock.close()
+        raise
     state = live_app.state.live
-    print(f"  pens: {', '.join(state.catalog.names)} | tactile: "
-          f"{'audio, right channel' if tactile == 'audio' else 'none (pen device)'} | "
-          f"store: {store}", flush=True)
-    for problem in state.catalog.skipped:
-        print(f"  skipped profile: {problem}", flush=True)
-    print("  Ctrl-C stops the server.", flush=True)
     # uvicorn stops gracefully on SIGINT/SIGTERM, then re-raises the signal: end quietly.
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
+        port = sock.getsockname()[1]
+        query = f"?token={token}" if token else ""
+        shown = lan_address() if lan and host in ("0.0.0.0", "::") else host
+        summary = [f"RealPen live: http://{url_host(shown)}:{port}/{query}"]
+        if lan:
+            summary.append(f"  (open it on the tablet; on this machine: "
+                           f"http://127.0.0.1:{port}/{query})")
+        summary.append(f"  pens: {', '.join(state.catalog.names)} | tactile: "
+                       f"{'audio, right channel' if tactile == 'audio' else 'none (pen device)'}"
+                       f" | store: {store}")
+        # Profiles that did not load are said here, once, on stdout (not logged to stderr).
+        summary += [f"  skipped profile: {problem}" for problem in state.catalog.skipped]
+        summary.append("  Ctrl-C stops the server.")
+        print("\n".join(summary), flush=True)  # one write: a quick Ctrl-C cannot split it
         run(live_app, sock)
     except KeyboardInterrupt:
         pass
     finally:
         signal.signal(signal.SIGTERM, previous)
         sock.close()
+        if state.final_counts is None:  # the app never shut down (it never started serving)
+            state.store.discard()
     strokes, samples = state.final_counts or (0, 0)
     print(f"stopped: the store holds {strokes} strokes, {samples} samples ({store})", flush=True)
 

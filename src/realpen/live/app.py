@@ -98,6 +98,9 @@ class LiveState:
         self.sessions.pop(session.id, None)
 
     def shutdown(self) -> None:
+        """Close the pages' sessions, the store and the device (once; later calls do nothing)."""
+        if self.final_counts is not None:
+            return
         for session in list(self.sessions.values()):
             self.close_session(session)
         self.final_counts = self.store.count()
@@ -106,9 +109,11 @@ class LiveState:
 
 
 def create_app(settings: LiveSettings | None = None) -> FastAPI:
-    """Build the live app. Profiles are loaded and the store opened here, so problems with them
-    surface as :class:`~realpen.errors.RealPenError` before serving; the store is closed (every
-    stroke committed) when the app shuts down.
+    """Build the live app. Profiles are loaded and the store opened here (the store last), so
+    problems with them surface as :class:`~realpen.errors.RealPenError` before serving; the store
+    is closed (every stroke committed) when the app shuts down. A caller that then fails to
+    serve should call ``app.state.live.store.discard()``: it closes the store and removes the
+    file if this app created it and nothing was stored.
     """
     settings = settings or LiveSettings()
     catalog = Catalog(settings.profiles)

@@ -2,17 +2,51 @@
 
 from __future__ import annotations
 
-import logging
+import math
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import RealPenError, fail
+from ..exports.base import resample_loop
 from ..fileio import wav_bytes
 from ..pens import BUNDLED_PENS
 from ..profile import PenProfile, list_profiles, load_profile
 
-log = logging.getLogger(__name__)
+MIN_WAV_RATE = 3000  # browsers' decodeAudioData refuses WAVs below 3 kHz (Chrome, the spec's floor)
+
+
+def playable_rate(frames: int, rate: int, preferred: int) -> int:
+    """The rate to serve a looping signal of ``frames`` samples at ``rate`` Hz in a browser.
+
+    ``rate`` itself when it is at least :data:`MIN_WAV_RATE`; else ``preferred`` (the sound's
+    rate) when the loop is a whole number of samples there; else the smallest whole multiple of
+    ``rate`` that is at least :data:`MIN_WAV_RATE` (always a whole number of samples).
+    """
+    rate, preferred = int(rate), int(preferred)
+    if rate >= MIN_WAV_RATE:
+        return rate
+    if preferred >= MIN_WAV_RATE and (frames * preferred) % rate == 0:
+        return preferred
+    return rate * math.ceil(MIN_WAV_RATE / rate)
+
+
+def playable_wav(samples: np.ndarray, rate: int, preferred: int, what: str) -> bytes:
+    """One period of a loop as a 32-bit float WAV a browser decodes (see :func:`playable_rate`).
+
+    Below 3 kHz the period is resampled as a loop (seamless across the wrap) and, should the
+    anti-aliasing filter overshoot full scale, scaled back to peak 1.
+    """
+    new_rate = playable_rate(len(samples), rate, preferred)
+    if new_rate == rate:
+        return wav_bytes(samples, rate)
+    resampled = resample_loop(samples, rate, new_rate, what)
+    peak = float(np.max(np.abs(resampled))) if len(resampled) else 0.0
+    if peak > 1.0:
+        resampled = resampled / peak
+    return wav_bytes(resampled, new_rate)
 
 
 @dataclass
@@ -22,15 +56,31 @@ class CatalogEntry:
     profile: PenProfile
     where: str
 
+    @property
+    def sound_rate(self) -> int:
+        """The rate the sound unit is served at (its own, unless below 3 kHz)."""
+        meta = self.profile.meta
+        return playable_rate(meta.sound.frames, meta.sound.rate, meta.sound.rate)
+
+    @property
+    def tactile_rate(self) -> int:
+        """The rate the tactile pattern is served at: its own, or, below 3 kHz (which browsers
+        cannot decode), the sound's rate or a whole multiple of its own."""
+        meta = self.profile.meta
+        return playable_rate(meta.tactile.frames, meta.tactile.rate, meta.sound.rate)
+
     @cached_property
     def sound_wav(self) -> bytes:
         """The sound unit as a 32-bit float WAV (the page decodes and loops it)."""
-        return wav_bytes(self.profile.sound, self.profile.meta.sound.rate)
+        return playable_wav(self.profile.sound, self.profile.meta.sound.rate,
+                            self.profile.meta.sound.rate, f"{self.profile.name} sound unit")
 
     @cached_property
     def tactile_wav(self) -> bytes:
-        """The tactile pattern as a 32-bit float WAV at its own rate (Web Audio resamples)."""
-        return wav_bytes(self.profile.tactile, self.profile.meta.tactile.rate)
+        """The tactile pattern as a 32-bit float WAV at :attr:`tactile_rate` (Web Audio
+        resamples it to the context's rate)."""
+        return playable_wav(self.profile.tactile, self.profile.meta.tactile.rate,
+                            self.profile.meta.sound.rate, f"{self.profile.name} tactile pattern")
 
     def to_json(self) -> dict:
         meta = self.profile.meta
@@ -40,8 +90,9 @@ class CatalogEntry:
             "version": self.profile.version, "where": self.where,
             "coupling": meta.coupling.to_json(),
             "sound": {"rate": meta.sound.rate, "frames": meta.sound.frames,
-                      "url": f"api/profiles/{name}/sound.wav"},
+                      "wav_rate": self.sound_rate, "url": f"api/profiles/{name}/sound.wav"},
             "tactile": {"rate": meta.tactile.rate, "frames": meta.tactile.frames,
+                        "wav_rate": self.tactile_rate,
                         "url": f"api/profiles/{name}/tactile.wav"},
         }
 
@@ -50,7 +101,8 @@ class Catalog:
     """Profiles by name: bundled pens first (pencil, ballpoint, marker), then the others.
 
     A name found twice keeps its first profile. A user or extra profile that does not load is
-    skipped with a warning (listed in :attr:`skipped`), so one bad bundle does not stop the app.
+    skipped and listed in :attr:`skipped` (``realpen serve`` prints the list once, on stdout,
+    in its startup summary), so one bad bundle does not stop the app.
     """
 
     def __init__(self, extra: list[Path] | None = None):
@@ -66,7 +118,6 @@ class Catalog:
                 if where == "bundled":
                     raise
                 self.skipped.append(str(error))
-                log.warning("skipping profile %s", error)
                 continue
             self.entries.setdefault(profile.name, CatalogEntry(profile, where))
         order = {name: i for i, name in enumerate(BUNDLED_PENS)}

@@ -14,6 +14,9 @@ Every message carries ``seq``, the page's message counter, and the server replie
 one-line ``message``; ``seq`` when it could be read). A message larger than
 :data:`MAX_MESSAGE_BYTES` or holding more than :data:`MAX_SAMPLES` samples is refused.
 
+Types are strict: a number is a JSON number (an integer where one is counted: ``seq``,
+``stroke``), a flag is ``true`` or ``false``, text is a string; nothing is coerced.
+
 Units: ``t`` in seconds on the page's clock (``performance.now() / 1000``); ``x``, ``y`` in mm
 from the writing surface's top-left corner (CSS pixels over the calibration); ``pressure``
 normalised 0–1 (a mouse reports the constant 0.5); ``tilt_x``, ``tilt_y`` in degrees
@@ -47,7 +50,9 @@ Millimetres = Annotated[float, Field(ge=-1e6, le=1e6)]
 
 
 class _Message(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    # strict: JSON types are taken as they are — true, "3" or 1.0 is not a seq, "0.5" is not a
+    # pressure, 1 is not a boolean (a number field still takes a JSON integer: 0 is 0.0).
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, strict=True)
 
 
 class Hello(_Message):

@@ -17,6 +17,7 @@ stand in for the file when a lab outgrows one machine (a later issue).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import logging
 import os
@@ -75,22 +76,32 @@ def _now() -> str:
 
 
 def _connect(path: Path, create: bool) -> sqlite3.Connection:
-    """Open (or create) a store and check that it is one."""
+    """Open (or create) a store and check that it is one.
+
+    Raises:
+        RealPenError: one line naming ``path``: no such store, a folder, a place where no file
+            can be made or opened, or a file that is not a RealPen stroke store.
+    """
     if not create and not path.exists():
         raise fail(path, "no such stroke store")
     if path.is_dir():
         raise fail(path, "is a folder, not a stroke store file")
-    if create:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    connection = sqlite3.connect(path, check_same_thread=False, timeout=5.0)
+    existing = next((parent for parent in path.parents if parent.exists()), None)
+    if existing is not None and not existing.is_dir():
+        raise fail(path, f"{existing} is a file, not a folder")
+    try:
+        if create:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        connection = sqlite3.connect(path, check_same_thread=False, timeout=5.0)
+    except (OSError, sqlite3.Error) as error:
+        raise fail(path, f"cannot open or create the stroke store here "
+                         f"({getattr(error, 'strerror', None) or error})") from None
     try:
         version = connection.execute("PRAGMA user_version").fetchone()[0]
         if version > SCHEMA_VERSION:
-            connection.close()
             raise fail(path, f"stroke store version {version} is newer than this RealPen "
                              f"reads ({SCHEMA_VERSION})")
         if version == 0 and not create:
-            connection.close()
             raise fail(path, "not a RealPen stroke store (empty or another SQLite file)")
         connection.execute("PRAGMA journal_mode=WAL")
         connection.execute("PRAGMA synchronous=NORMAL")
@@ -99,14 +110,19 @@ def _connect(path: Path, create: bool) -> sqlite3.Connection:
             tables = {row[0] for row in connection.execute(
                 "SELECT name FROM sqlite_master WHERE type='table'")}
             if tables - {"strokes", "samples", "sqlite_sequence"}:
-                connection.close()
                 raise fail(path, "an SQLite file that is not a RealPen stroke store")
             connection.executescript(SCHEMA)
             connection.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             connection.commit()
-    except sqlite3.DatabaseError as error:
+    except sqlite3.OperationalError as error:  # unreadable, read-only, locked, out of space
+        connection.close()
+        raise fail(path, f"cannot use the stroke store ({error})") from None
+    except sqlite3.DatabaseError as error:  # e.g. "file is not a database"
         connection.close()
         raise fail(path, f"not a RealPen stroke store ({error})") from None
+    except BaseException:
+        connection.close()
+        raise
     return connection
 
 
@@ -115,7 +131,13 @@ class StrokeStore:
 
     def __init__(self, path: str | os.PathLike, checkpoint_s: float = CHECKPOINT_S):
         self.path = Path(path)
-        self._db = _connect(self.path, create=True)
+        self.created = not self.path.exists()  # this store made the file (see discard)
+        try:
+            self._db = _connect(self.path, create=True)
+        except BaseException:
+            if self.created:
+                _remove_store_files(self.path)
+            raise
         self._db.execute("PRAGMA wal_autocheckpoint=0")
         self._lock = threading.Lock()
         self._open: dict[int, tuple[float, int]] = {}  # stroke id → (page t0, samples so far)
@@ -194,6 +216,22 @@ class StrokeStore:
                 self._db = None
 
 
+    def discard(self) -> None:
+        """Close, and remove the file if this store created it and it holds no stroke: for a
+        server that fails to start, so that it leaves nothing behind."""
+        empty = self._db is not None and self.count() == (0, 0)
+        self.close()
+        if self.created and empty:
+            _remove_store_files(self.path)
+
+
+def _remove_store_files(path: Path) -> None:
+    """Remove a store file and its journal files (``-wal``, ``-shm``, ``-journal``)."""
+    for suffix in ("", "-wal", "-shm", "-journal"):
+        with contextlib.suppress(OSError):
+            Path(f"{path}{suffix}").unlink()
+
+
 def _rows(connection: sqlite3.Connection, stroke: int | None) -> Iterable[tuple]:
     where, args = ("WHERE s.id = ?", (stroke,)) if stroke is not None else ("", ())
     return connection.execute(
@@ -214,11 +252,15 @@ def export_csv(store: str | os.PathLike, output: str | os.PathLike,
         (strokes, rows) written.
 
     Raises:
-        RealPenError: no such store, not a stroke store, or no stroke with that id.
+        RealPenError: no such store, not a stroke store (or a damaged one), no stroke with that
+            id, or an output that cannot be written (a folder, an unwritable place, the store
+            itself); nothing is written then.
     """
-    store = Path(store)
+    store, output = Path(store), Path(output)
     connection = _connect(store, create=False)
     try:
+        if output.exists() and output.resolve() == store.resolve():
+            raise fail(output, "is the stroke store itself; give another file name for the CSV")
         if stroke is not None and connection.execute(
                 "SELECT 1 FROM strokes WHERE id = ?", (stroke,)).fetchone() is None:
             raise fail(store, f"no stroke with id {stroke}")
@@ -232,5 +274,7 @@ def export_csv(store: str | os.PathLike, output: str | os.PathLike,
                     strokes.add(row[0])
                     rows += 1
         return len(strokes), rows
+    except sqlite3.DatabaseError as error:  # a damaged store: nothing is written
+        raise fail(store, f"cannot read the stroke store ({error})") from None
     finally:
         connection.close()

@@ -10,6 +10,10 @@
 // sample, and the coupling functions themselves (model.*).
 //
 // URL parameters preset the page for a study: ?pen=marker&modality=tactile&ink=hidden&tactile=audio
+//
+// A pen whose audio does not load (or decode) never breaks the page: picking it keeps the
+// current pen, at start-up the page falls back to the first pen that loads, and either way a
+// notice says what failed.
 
 import { alpha, gainRaw, onePole, playbackRate, Smoother } from './coupling.js';
 import { CSS_PX_PER_MM, MOUSE_PRESSURE, PenTracker, SPEED_WINDOW_MS } from './pen.js';
@@ -55,10 +59,13 @@ const saved = {
 };
 
 const pick = (value, allowed, fallback) => (allowed.includes(value) ? value : fallback);
+const describe = (error) => String((error && error.message && error.name)
+  ? `${error.name}: ${error.message}` : error);
 
 const state = {
   ready: false,
   error: null,
+  notice: null,
   config: null,
   profiles: [],
   pen: null,
@@ -91,6 +98,7 @@ const smoother = new Smoother(audio.sampleRate, 5);
 const ink = new Ink($('ink'));
 const buffers = new Map();
 let lastSentTarget = null;
+let penRequest = 0;
 
 Object.defineProperties(state, {
   gain: { enumerable: true, get: () => audio.soundGain.gain.value },
@@ -145,7 +153,6 @@ function record(t, pressure, speed, target, smoothed) {
 }
 
 function penDown(info, sample) {
-  startAudio();
   if (!state.coupling) return;
   $('hint').classList.add('gone');
   state.stroke += 1;
@@ -168,7 +175,6 @@ function penSamples(samples) {
 }
 
 function penUp(t) {
-  startAudio();
   if (!state.down) return;
   state.down = false;
   const smoothed = smoother.advanceTo(t);
@@ -184,9 +190,38 @@ function penUp(t) {
 const tracker = new PenTracker($('surface'), {
   pxPerMm: state.pxPerMm, onDown: penDown, onSamples: penSamples, onUp: penUp });
 
+// ---- starting audio -------------------------------------------------------------------------
+// Browsers start an AudioContext only while the page has user activation, and which events give
+// it depends on the pointer: under the HTML rules a mouse's pointerdown (or mousedown) does, but
+// a pen's or a finger's pointerdown does not — their pointerup and touchend do (and the click
+// that follows is still inside the activation). Chrome on a desktop is lenient; Safari on an
+// iPad is not. So every one of these events, anywhere on the page and in the capture phase (no
+// handler can hide it), asks for a resume until the context runs: a pen's first pointerdown
+// is refused quietly and its pointerup starts the audio. If the browser suspends the context
+// later (iOS after a call, a page in the background), the listeners are armed again.
+
+const ACTIVATION_EVENTS = ['pointerdown', 'mousedown', 'pointerup', 'touchend', 'click', 'keydown'];
+const LISTEN = { capture: true, passive: true };
+let audioArmed = false;
+
 function startAudio() {
-  audio.resume().then(scheduleStatus);
+  audio.resume();
 }
+
+function armAudioStart(on) {
+  if (on === audioArmed) return;
+  audioArmed = on;
+  for (const type of ACTIVATION_EVENTS) {
+    if (on) window.addEventListener(type, startAudio, LISTEN);
+    else window.removeEventListener(type, startAudio, LISTEN);
+  }
+}
+
+audio.onStateChange((audioState) => {
+  armAudioStart(audioState !== 'running' && audioState !== 'closed');
+  scheduleStatus();
+});
+armAudioStart(audio.state !== 'running');
 
 // ---- pickers ------------------------------------------------------------------------------
 
@@ -199,22 +234,88 @@ function mark(group, value) {
 function onPick(group, handler) {
   $(group).addEventListener('click', (event) => {
     const button = event.target.closest('button[data-value]');
-    if (button) {
-      startAudio();
-      handler(button.dataset.value);
-    }
+    if (button) handler(button.dataset.value);
   });
 }
 
-async function selectPen(name) {
-  const chosen = state.profiles.find((p) => p.name === name) || state.profiles[0];
+function showNotice(text) {
+  state.notice = text;
+  $('notice-text').textContent = text;
+  $('notice').hidden = false;
+}
+
+function clearNotice() {
+  state.notice = null;
+  $('notice').hidden = true;
+}
+
+/** A pen's decoded audio (cached; a failed load is forgotten so that a later pick retries). */
+function loadBuffers(chosen) {
+  if (!buffers.has(chosen.name)) {
+    const loading = audio.load(chosen, getBytes);
+    buffers.set(chosen.name, loading);
+    loading.catch(() => { if (buffers.get(chosen.name) === loading) buffers.delete(chosen.name); });
+  }
+  return buffers.get(chosen.name);
+}
+
+/**
+ * Make `chosen` the pen once its audio has decoded: until then (and if it fails, for good) the
+ * current pen stays, playing and drawing. Rejects when the audio does not load; resolves to
+ * false when a later pick overtook this one.
+ */
+async function switchPen(chosen) {
+  const request = ++penRequest;
+  const decoded = await loadBuffers(chosen);
+  if (request !== penRequest) return false;
   Object.assign(state, { pen: chosen.name, profileVersion: chosen.version, coupling: chosen.coupling });
   smoother.configure(audio.sampleRate, chosen.coupling.smoothing_ms);
+  audio.use(decoded, chosen.coupling, chosen.name);
   mark('pens', chosen.name);
   saved.set('pen', chosen.name);
-  if (!buffers.has(chosen.name)) buffers.set(chosen.name, audio.load(chosen, getBytes));
-  const decoded = await buffers.get(chosen.name);
-  if (state.pen === chosen.name) audio.use(decoded, chosen.coupling);
+  scheduleStatus();
+  return true;
+}
+
+/** The pen picker: switch, or keep the current pen and say why not. Never rejects. */
+async function selectPen(name) {
+  const chosen = state.profiles.find((p) => p.name === name);
+  if (!chosen) return;
+  try {
+    if (await switchPen(chosen)) clearNotice();
+  } catch (error) {
+    console.warn(`realpen: the ${chosen.name} pen's audio did not load:`, error);
+    mark('pens', state.pen);
+    showNotice(`Could not load the ${chosen.name} pen's audio (${describe(error)})`
+      + (state.pen ? `; still writing with ${state.pen}.` : '.'));
+  }
+}
+
+/** At start: the pen asked for (URL, else the one saved in this browser), else the first pen
+ *  that loads; a pen that fails is reported, never left blocking the page. */
+async function startPen(wanted) {
+  const problems = [];
+  if (wanted && !state.profiles.some((p) => p.name === wanted)) {
+    problems.push(`no pen '${wanted}' on this server`);
+  }
+  const order = [...new Set([wanted, ...state.profiles.map((p) => p.name)])]
+    .map((name) => state.profiles.find((p) => p.name === name)).filter(Boolean);
+  let failed = 0;
+  for (const chosen of order) {
+    try {
+      await switchPen(chosen); // false: a pick on the picker overtook it, which then rules
+      break;
+    } catch (error) {
+      failed += 1;
+      console.warn(`realpen: the ${chosen.name} pen's audio did not load:`, error);
+      problems.push(`could not load the ${chosen.name} pen's audio (${describe(error)})`);
+    }
+  }
+  if (failed === order.length) throw new Error(`no pen could be loaded: ${problems.join('; ')}`);
+  if (problems.length && state.pen) {
+    const text = problems.join('; ');
+    showNotice(`${text.charAt(0).toUpperCase()}${text.slice(1)}; writing with ${state.pen}.`);
+  }
 }
 
 function selectModality(value) {
@@ -313,10 +414,10 @@ function renderStatus() {
   const a = audio.report();
   const latency = (a.baseLatency || 0) + (a.outputLatency || 0);
   const audioPill = $('st-audio');
-  audioPill.textContent = a.state === 'running' ? `audio ${(latency * 1000).toFixed(0)} ms` : 'audio starts on first touch';
+  audioPill.textContent = a.state === 'running' ? `audio ${(latency * 1000).toFixed(0)} ms` : 'tap to start audio';
   audioPill.title = a.state === 'running'
     ? `${(a.sampleRate / 1000).toFixed(1)} kHz; base latency ${(a.baseLatency * 1000).toFixed(1)} ms, output latency ${(a.outputLatency * 1000).toFixed(1)} ms`
-    : 'Browsers start audio with a user gesture: the first stroke or tap';
+    : 'Browsers start audio with a user gesture: a click, or the lift of a pen or finger';
   const calibrate = $('calibrate');
   calibrate.textContent = state.calibrated ? `${state.pxPerMm.toFixed(2)} px/mm` : 'Calibrate';
   calibrate.classList.toggle('warn', !state.calibrated);
@@ -327,24 +428,44 @@ function renderStatus() {
 
 // ---- start ---------------------------------------------------------------------------------
 
+/**
+ * With --lan the page was opened as …/?token=…; the server set its cookie on that response.
+ * Once a request without the token succeeds (the cookie works), the token leaves the address
+ * bar and the history, so it is not kept in bookmarks, shared screenshots or a synced history;
+ * the page keeps it in memory for its own requests and reconnects.
+ */
+async function forgetTokenInAddress() {
+  if (!token) return;
+  try {
+    const response = await fetch('api/config', { credentials: 'same-origin', cache: 'no-store' });
+    if (!response.ok) return; // no cookie (blocked?): keep the token so that a reload works
+  } catch { return; }
+  const url = new URL(window.location.href);
+  url.searchParams.delete('token');
+  window.history.replaceState(window.history.state, '', `${url.pathname}${url.search}${url.hash}`);
+}
+
 async function start() {
   try {
     const [config, list] = await Promise.all([getJson('api/config'), getJson('api/profiles')]);
     state.config = config;
     state.profiles = list.profiles;
+    await forgetTokenInAddress();
     buildPenPicker();
     onPick('pens', selectPen);
     onPick('modalities', selectModality);
     onPick('inks', selectInk);
-    $('tactile-audio').addEventListener('click', () => { startAudio(); setTactileAudio(!state.tactileAudio); });
+    $('tactile-audio').addEventListener('click', () => setTactileAudio(!state.tactileAudio));
     $('calibrate').addEventListener('click', openCalibration);
     $('clear').addEventListener('click', () => ink.clear());
+    $('notice-close').addEventListener('click', clearNotice);
+    $('notice').addEventListener('pointerdown', (event) => event.stopPropagation()); // not a stroke
     selectModality(state.modality);
     selectInk(state.ink);
     setCalibration(state.pxPerMm, state.calibrated);
     const tactileParam = query.get('tactile');
     setTactileAudio(tactileParam ? tactileParam === 'audio' : config.tactile === 'audio');
-    await selectPen(query.get('pen') || saved.get('pen', state.profiles[0].name));
+    await startPen(query.get('pen') || saved.get('pen', null));
     state.ready = true;
   } catch (error) {
     state.error = String(error);

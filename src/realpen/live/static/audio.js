@@ -6,8 +6,9 @@
 //
 // With tactile over audio on, the right channel drives an actuator through an amplifier (the
 // common research set-up) and the left channel carries the sound. The context is created with
-// the interactive latency hint; browsers keep it suspended until a user gesture, so it starts
-// on the first touch (`resume`). Both loops run from then on; the gains (smoothed by
+// the interactive latency hint; browsers keep it suspended until the page has user activation,
+// so app.js calls `resume` from every event that may carry it until the context runs (see
+// "starting audio" there). Both loops run from then on; the gains (smoothed by
 // setTargetAtTime with the profile's time constant, which is the smoother of coupling.js)
 // make them silent whenever the pen is lifted.
 //
@@ -26,6 +27,8 @@ export class AudioEngine {
     this.tactileAudio = null;
     this.sources = [];
     this.sound = null;
+    this.playing = null;
+    this.buffers = null;
     this.tau = 0.005;
     this.routeTactile(false);
   }
@@ -34,23 +37,42 @@ export class AudioEngine {
     return this.ctx.sampleRate;
   }
 
-  /** Start (or restart) audio: call from a user gesture. */
-  async resume() {
-    if (this.ctx.state !== 'running') {
-      try { await this.ctx.resume(); } catch (error) { console.warn('audio:', error); }
-    }
+  get state() {
     return this.ctx.state;
   }
 
-  /** Decode a profile's sound unit and tactile pattern (Web Audio resamples the 8 kHz one). */
+  /** Call `listener(state)` whenever the context starts, suspends or is interrupted. */
+  onStateChange(listener) {
+    this.ctx.addEventListener('statechange', () => listener(this.ctx.state));
+  }
+
+  /**
+   * Ask the browser to start (or restart) audio. It must be called synchronously from the
+   * handler of an event that gives the page user activation, or the browser refuses: the
+   * refusal is quiet (the promise stays pending in Chrome and rejects in Safari), and the next
+   * gesture asks again. Returns the state at the time of the call.
+   */
+  resume() {
+    const before = this.ctx.state;
+    if (before === 'running' || before === 'closed') return before;
+    try {
+      const pending = this.ctx.resume();
+      if (pending && typeof pending.catch === 'function') pending.catch(() => {});
+    } catch { /* refused: the next gesture asks again */ }
+    return before;
+  }
+
+  /** Decode a profile's sound unit and tactile pattern (the server sends both at 3 kHz or
+   *  more, which every browser decodes; Web Audio resamples them to the context's rate).
+   *  Rejects (e.g. EncodingError) when either does not decode. */
   async load(profile, fetchBytes) {
     const [sound, tactile] = await Promise.all([profile.sound.url, profile.tactile.url].map(
       async (url) => this.ctx.decodeAudioData(await fetchBytes(url))));
     return { sound, tactile };
   }
 
-  /** Loop these buffers from now on, replacing the previous pen's. */
-  use(buffers, coupling) {
+  /** Loop these buffers (of the pen `name`) from now on, replacing the previous pen's. */
+  use(buffers, coupling, name = null) {
     for (const source of this.sources) {
       try { source.stop(); } catch { /* never started */ }
       source.disconnect();
@@ -63,6 +85,8 @@ export class AudioEngine {
     this.sound.start();
     tactile.start();
     this.sources = [this.sound, tactile];
+    this.playing = name;
+    this.buffers = buffers;
   }
 
   /** Tactile pattern on the right channel (sound on the left), or no tactile audio. */
@@ -99,6 +123,9 @@ export class AudioEngine {
       soundGain: this.soundGain.gain.value,
       tactileGain: this.tactileGain.gain.value,
       tactileAudio: this.tactileAudio,
+      playing: this.playing,
+      buffers: this.buffers && Object.fromEntries(Object.entries(this.buffers).map(
+        ([part, b]) => [part, { sampleRate: b.sampleRate, length: b.length, duration: b.duration }])),
     };
   }
 }
