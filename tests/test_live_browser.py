@@ -25,6 +25,7 @@ import pytest
 from live_support import low_rate_profile, serve
 from realpen.coupling import Coupling, one_pole
 from realpen.profile import resolve_profile
+from realpen.stroke import Trajectory
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
@@ -179,21 +180,6 @@ def session_log(server, session: str) -> list[dict]:
 def store_rows(server, sql: str, *args):
     with sqlite3.connect(server.store) as db:
         return db.execute(sql, args).fetchall()
-
-
-def window_speed(t, x, y, window: float) -> np.ndarray:
-    """pen.js's speed: path length over the last ``window`` s (at least one step), 0 at first."""
-    points, speeds, speed = [], [], 0.0
-    for ti, xi, yi in zip(t, x, y):
-        travelled = points[-1][3] + math.hypot(xi - points[-1][1], yi - points[-1][2]) \
-            if points else 0.0
-        points.append((ti, xi, yi, travelled))
-        while len(points) > 2 and points[1][0] <= ti - window:
-            points.pop(0)
-        if ti - points[0][0] > 0:
-            speed = (travelled - points[0][3]) / (ti - points[0][0])
-        speeds.append(speed)
-    return np.array(speeds)
 
 
 def smoothed_reference(trace: list[dict], smoothing_ms: float) -> np.ndarray:
@@ -377,7 +363,9 @@ def test_calibration_sets_mm_and_speed(open_page, server):
     assert np.allclose(np.diff(xy[:, 0]), 0.5) and np.all(xy[:, 1] == xy[0, 1])
     # Speed: path length over the last SPEED_WINDOW_MS, from the page's own timestamps.
     window = page.eval("realpen.model.SPEED_WINDOW_MS") / 1000
-    expected = window_speed([e["t"] for e in trace], xy[:, 0], xy[:, 1], window)
+    # The page and the library's stroke rendering measure speed the same way.
+    times = np.array([e["t"] for e in trace])
+    expected = Trajectory(times, xy[:, 0], xy[:, 1], np.ones(len(times))).speed(window * 1000)
     assert np.max(np.abs(np.array([e["speed"] for e in trace]) - expected)) < 1e-9
     assert np.allclose(expected[3:], 62.5, rtol=0.03)  # 4 px / 8 ms at 8 px/mm
     assert store_rows(server, "SELECT px_per_mm, calibrated FROM strokes WHERE session = ?",
