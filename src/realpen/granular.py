@@ -215,8 +215,7 @@ class GranularTexture:
             "steady_s": round(sum(b - a for a, b in self.part.stretches) / self.rate, 6),
             "grain_ms": self.grain_ms,
             "seed": self.seed,
-            "seam": {key: round(value, 4) if isinstance(value, float) else value
-                     for key, value in self.seam.__dict__.items()},
+            "seam": self.seam.to_json(),
             "gain": self.gain,
             "rms_dbfs": round(level_db(self.samples), 3),
         }

@@ -295,6 +295,11 @@ class Seam:
     flux_wrap_percentile: float
     pairs: int
 
+    def to_json(self) -> dict:
+        """The figures, rounded to 0.1 mdB, for a JSON report."""
+        return {key: round(value, 4) if isinstance(value, float) else value
+                for key, value in self.__dict__.items()}
+
 
 def seam_report(loop: np.ndarray, rate: float, edge_ms: float = EDGE_MS,
                 hop_ms: float = HOP_MS, source: object = "loop") -> Seam:
@@ -523,8 +528,7 @@ class LoopUnit:
             "weights": self.weights,
             "windows_scanned": self.windows,
             "windows_near_silence": self.rejected,
-            "seam": {key: round(value, 4) if isinstance(value, float) else value
-                     for key, value in self.seam.__dict__.items()},
+            "seam": self.seam.to_json(),
             "gain": self.gain,
             "rms_dbfs": round(level_db(self.samples), 3),
         }
