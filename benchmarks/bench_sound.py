@@ -21,7 +21,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 from scipy import signal  # noqa: E402
 
-from realpen.sound import HOP_MS, UNIT_MS, scan_windows  # noqa: E402
+from realpen.sound.loop import HOP_MS, UNIT_MS, scan_windows  # noqa: E402
 
 RATE = 48000
 

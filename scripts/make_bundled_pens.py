@@ -15,7 +15,7 @@ from pathlib import Path
 
 from realpen.pens import BUNDLED_PENS, BUNDLE_ACTUATOR, bundled_dir
 from realpen.pens.build import build_modelled_pen
-from realpen.profile import save_profile
+from realpen.profile.bundle import save_profile
 
 
 def main() -> None:

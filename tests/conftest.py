@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
 import subprocess
 import sys
+import traceback
 from pathlib import Path
+from unittest import mock
 
 import pytest
 
@@ -32,8 +37,37 @@ def lmt_dir() -> Path:
 
 
 def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    """Run ``realpen ARGS`` in a fresh interpreter and capture its output."""
-    return subprocess.run([sys.executable, "-m", "realpen.cli", *map(str, args)],
+    """Run ``realpen ARGS`` in this interpreter and capture its output and exit code.
+
+    The command line's own entry point (:func:`realpen.cli.main`) runs as the console script
+    would, with ``sys.argv`` set and stdout/stderr captured; the result has the shape of a
+    :class:`subprocess.CompletedProcess` so end-to-end tests can use :func:`run_cli_process`.
+    """
+    from realpen.cli import main
+
+    stdout, stderr = io.StringIO(), io.StringIO()
+    argv = ["realpen", *map(str, args)]
+    code = 0
+    previous = os.getcwd()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr), \
+            mock.patch.object(sys, "argv", argv):
+        try:
+            if cwd is not None:
+                os.chdir(cwd)
+            main()
+        except SystemExit as exit_:
+            code = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
+        except BaseException:  # a traceback escaped main(): report it like the interpreter would
+            stderr.write(traceback.format_exc())
+            code = 1
+        finally:
+            os.chdir(previous)
+    return subprocess.CompletedProcess(argv, code, stdout.getvalue(), stderr.getvalue())
+
+
+def run_cli_process(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """Run ``python -m realpen ARGS`` in a fresh interpreter (for the few end-to-end tests)."""
+    return subprocess.run([sys.executable, "-m", "realpen", *map(str, args)],
                           capture_output=True, text=True, cwd=cwd, timeout=300)
 
 

@@ -18,8 +18,8 @@ from typing import Iterator
 import numpy as np
 
 from realpen.exports.base import resample_loop
-from realpen.fileio import wav_bytes
-from realpen.profile import PenProfile, resolve_profile, save_profile
+from realpen.io.files import wav_bytes
+from realpen.profile.bundle import PenProfile, resolve_profile, save_profile
 
 URL_LINE = re.compile(r"RealPen live: (http://\S+)")
 
@@ -57,7 +57,7 @@ def serve(tmp_path: Path, *args: str, timeout: float = 30,
     """
     env = {**os.environ, "REALPEN_HOME": str(tmp_path / "home"), "PYTHONUNBUFFERED": "1"}
     store = [] if "--store" in args else ["--store", str(tmp_path / "strokes.sqlite3")]
-    command = [sys.executable, "-m", "realpen.cli", "serve", "--port", "0", *store, *args]
+    command = [sys.executable, "-m", "realpen", "serve", "--port", "0", *store, *args]
     errors = open(stderr_to, "w") if stderr_to else None
     process = subprocess.Popen(command, stdout=subprocess.PIPE,
                                stderr=errors if errors else subprocess.STDOUT, text=True, env=env)

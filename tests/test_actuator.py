@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from realpen.actuator import load_measured, parse_actuator, weighting
+from realpen.tactile.actuator import load_measured, parse_actuator, weighting
 from realpen.errors import RealPenError
 
 

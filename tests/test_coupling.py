@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from realpen.coupling import Coupling, fit_coupling, load_measurements, one_pole
+from realpen.sound.coupling import Coupling, fit_coupling, load_measurements, one_pole
 from realpen.errors import RealPenError
 
 TRUTH = dict(c_p=0.8, c_op=0.15, c_x=0.015, c_ov=10.0)

@@ -20,8 +20,8 @@ from realpen.exports import FORMATS, ahap, android, c_header, export_profile, ha
 from realpen.exports import envelope as env
 from realpen.exports import wav
 from realpen.exports.base import resample_loop
-from realpen.profile import resolve_profile
-from realpen.tactile import synthesize
+from realpen.profile.bundle import resolve_profile
+from realpen.tactile.pattern import synthesize
 
 PENS = ("pencil", "ballpoint", "marker")
 FRAME_S = 0.010

@@ -23,9 +23,9 @@ import numpy as np
 import pytest
 
 from live_support import low_rate_profile, serve
-from realpen.coupling import Coupling, one_pole
-from realpen.profile import resolve_profile
-from realpen.stroke import Trajectory
+from realpen.sound.coupling import Coupling, one_pole
+from realpen.profile.bundle import resolve_profile
+from realpen.sound.stroke import Trajectory
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"

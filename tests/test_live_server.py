@@ -28,8 +28,8 @@ from realpen.live.app import LiveSettings, create_app  # noqa: E402
 from realpen.live.catalog import MIN_WAV_RATE, playable_rate, playable_wav  # noqa: E402
 from realpen.live.messages import MAX_MESSAGE_BYTES, MessageError, parse_message  # noqa: E402
 from realpen.live.store import CSV_COLUMNS, StrokeStore, export_csv  # noqa: E402
-from realpen.profile import load_profile, resolve_profile, save_profile  # noqa: E402
-from realpen.stroke import load_trajectory  # noqa: E402
+from realpen.profile.bundle import load_profile, resolve_profile, save_profile  # noqa: E402
+from realpen.sound.stroke import load_trajectory  # noqa: E402
 
 LOCAL = "http://127.0.0.1"
 WS = "ws://127.0.0.1/ws"

@@ -12,13 +12,13 @@ import pytest
 import soundfile as sf
 
 from conftest import assert_clean_failure, run_cli
-from realpen.actuator import parse_actuator
-from realpen.compare import spectral_distance_db
+from realpen.tactile.actuator import parse_actuator
+from realpen.profile.compare import spectral_distance_db
 from realpen.errors import RealPenError
-from realpen.fileio import wav_bytes
+from realpen.io.files import wav_bytes
 from realpen.pens import BUNDLE_ACTUATOR, BUNDLED_PENS, bundled_dir
 from realpen.pens.build import build_modelled_pen, write_model_recordings
-from realpen.profile import load_profile, resolve_profile, save_profile
+from realpen.profile.bundle import load_profile, resolve_profile, save_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -214,8 +214,8 @@ def test_cli_build_bad_input_leaves_nothing(tmp_path):
 def test_profile_from_real_recordings(hatt_dir, lmt_dir, tmp_path):
     """HaTT paper model for vibration, LMT-108 Rough Paper for sound; never bundled."""
     from realpen.datasets.hatt import load_hatt, synthesize
-    from realpen.profile import build_profile
-    from realpen.sound import load_sound
+    from realpen.profile.bundle import build_profile
+    from realpen.sound.loop import load_sound
     vibration = synthesize(load_hatt(hatt_dir / "Models_Resume Paper.xml"), 100.0, 1.5, 4.0, seed=2)
     sound = load_sound(lmt_dir / "G8RoughPaper_Sound_Movement_train1.wav")
     profile = build_profile("resume-paper", "stylus", vibration, sound,

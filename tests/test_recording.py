@@ -7,7 +7,8 @@ import pytest
 import soundfile as sf
 
 from realpen.errors import RealPenError
-from realpen.recording import Recording, combine_axes, dft321, highpass, load_recording, resample
+from realpen.io.recording import Recording, load_recording
+from realpen.dsp.filters import combine_axes, dft321, highpass, resample
 from signals import sines
 
 RATE = 1344

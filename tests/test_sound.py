@@ -15,12 +15,12 @@ from scipy import signal
 
 import realpen
 from conftest import LMT_DIR
-from realpen.coupling import Coupling
+from realpen.sound.coupling import Coupling
 from realpen.errors import RealPenError
-from realpen.granular import granular, granular_loop, steady_part
-from realpen.sound import (crossfade_gains, find_loop_unit, level_db, load_sound, make_loop,
+from realpen.sound.granular import granular, granular_loop, steady_part
+from realpen.sound.loop import (crossfade_gains, find_loop_unit, level_db, load_sound, make_loop,
                            scan_windows, seam_report)
-from realpen.stroke import Trajectory, control_signals, load_trajectory, render_stroke
+from realpen.sound.stroke import Trajectory, control_signals, load_trajectory, render_stroke
 
 RATE = 48000
 UNIT = 14400   # 300 ms
@@ -648,8 +648,9 @@ UNIT_OF = {"rate": "Hz", "speed": "mm/s", "level_dbfs": "dBFS", "rms_dbfs": "dBF
 
 
 def public_callables():
-    from realpen import coupling, csvtable, granular, sound, stroke
-    for module in (sound, granular, stroke, coupling, csvtable):
+    from realpen.io import csvtable
+    from realpen.sound import coupling, granular, loop, stroke
+    for module in (loop, granular, stroke, coupling, csvtable):
         for name, item in vars(module).items():
             if name.startswith("_") or getattr(item, "__module__", None) != module.__name__:
                 continue

@@ -13,8 +13,8 @@ import soundfile as sf
 from scipy import signal
 
 from conftest import LMT_DIR, assert_clean_failure, run_cli
-from realpen.coupling import Coupling
-from realpen.sound import level_db, load_sound, seam_report
+from realpen.sound.coupling import Coupling
+from realpen.sound.loop import level_db, load_sound, seam_report
 
 RATE = 48000
 ROUGH_PAPER = LMT_DIR / "G8RoughPaper_Sound_Movement_train1.wav"
@@ -391,8 +391,8 @@ def test_a_report_holding_nan_is_refused_before_the_wav_is_written(tmp_path, rec
                                                                     monkeypatch, mode):
     from realpen.cli import sound_cmds
     from realpen.errors import RealPenError
-    from realpen.granular import GranularTexture
-    from realpen.sound import LoopUnit
+    from realpen.sound.granular import GranularTexture
+    from realpen.sound.loop import LoopUnit
 
     for kind in (LoopUnit, GranularTexture):
         real = kind.to_json

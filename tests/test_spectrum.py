@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from realpen.errors import RealPenError
-from realpen.spectrum import analyze, principal_frequencies, select_units
+from realpen.dsp.spectrum import analyze, principal_frequencies, select_units
 from signals import sines
 
 RATE = 1344

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from realpen.actuator import parse_actuator
+from realpen.tactile.actuator import parse_actuator
 from realpen.errors import RealPenError
 from realpen.examples import example_recording_path
-from realpen.recording import Recording, load_recording
-from realpen.tactile import CONDITIONS, TactileParams, build_pattern, synthesize
+from realpen.io.recording import Recording, load_recording
+from realpen.tactile.pattern import CONDITIONS, TactileParams, build_pattern, synthesize
 from signals import fit_amplitudes, sines
 
 RATE = 1344

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from realpen.actuator import parse_actuator
+from realpen.tactile.actuator import parse_actuator
 from realpen.datasets.hatt import load_hatt, synthesize
-from realpen.tactile import TactileParams, build_pattern
+from realpen.tactile.pattern import TactileParams, build_pattern
 
 PAPERS = ["Book", "Resume Paper", "Tissue Paper", "Playing Card", "Cardboard", "Paper Bag"]
 

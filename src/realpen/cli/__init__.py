@@ -16,7 +16,7 @@ try:  # recent typer releases carry their own copy of click
 except ImportError:  # older typer uses click itself
     from click import exceptions as click_errors
 
-from ..errors import RealPenError
+from realpen.errors import RealPenError
 
 app = typer.Typer(
     name="realpen",
@@ -51,8 +51,8 @@ def _fail(message: str, code: int) -> None:
 
 
 # Subcommand modules register themselves on `app` when imported.
-from . import tactile_cmds  # noqa: E402,F401
-from . import sound_cmds  # noqa: E402,F401
-from . import profile_cmds  # noqa: E402,F401
-from . import serve_cmds  # noqa: E402,F401
-from . import export_cmds  # noqa: E402,F401
+from realpen.cli import tactile_cmds  # noqa: E402,F401
+from realpen.cli import sound_cmds  # noqa: E402,F401
+from realpen.cli import profile_cmds  # noqa: E402,F401
+from realpen.cli import serve_cmds  # noqa: E402,F401
+from realpen.cli import export_cmds  # noqa: E402,F401

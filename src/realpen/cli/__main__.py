@@ -1,5 +1,5 @@
 """``python -m realpen.cli`` runs the ``realpen`` command."""
 
-from . import main
+from realpen.cli import main
 
 main()

@@ -7,10 +7,10 @@ from typing import Optional
 
 import typer
 
-from ..exports import export_profile, format_names
-from ..profile import resolve_profile
-from . import app
-from .common import console
+from realpen.exports import export_profile, format_names
+from realpen.profile.bundle import resolve_profile
+from realpen.cli import app
+from realpen.cli.common import console
 
 
 @app.command()

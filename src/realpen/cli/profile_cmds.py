@@ -8,15 +8,15 @@ from typing import Optional
 import typer
 from rich.table import Table
 
-from ..actuator import parse_actuator
-from ..coupling import Coupling
-from ..errors import RealPenError
-from ..profile import build_profile, list_profiles, load_profile, resolve_profile, save_profile
-from ..recording import load_recording
-from ..sound import load_sound
-from ..tactile import TactileParams
-from . import app
-from .common import PROGRESS_AFTER_S, console, progress_bar
+from realpen.tactile.actuator import parse_actuator
+from realpen.sound.coupling import Coupling
+from realpen.errors import RealPenError
+from realpen.profile.bundle import build_profile, list_profiles, load_profile, resolve_profile, save_profile
+from realpen.io.recording import load_recording
+from realpen.sound.loop import load_sound
+from realpen.tactile.pattern import TactileParams
+from realpen.cli import app
+from realpen.cli.common import PROGRESS_AFTER_S, console, progress_bar
 
 profile_app = typer.Typer(help="Pen profiles: build, list and show.", no_args_is_help=True)
 app.add_typer(profile_app, name="profile")
@@ -107,7 +107,7 @@ def show(
     console.print(f"sound unit: {meta.sound.unit_ms:g} ms from {meta.sound.start_s} s, seam level "
                   f"jump {meta.sound.seam.get('level_jump_db', float('nan')):.2f} dB")
     if plot is not None:
-        from ..plots import save_profile_plot  # matplotlib is slow to import; only when asked
+        from realpen.display.profile import save_profile_plot  # matplotlib is slow to import; only when asked
 
         save_profile_plot(profile, plot)
         console.print(f"wrote {plot}")

@@ -9,10 +9,10 @@ from typing import List, Optional
 
 import typer
 
-from ..errors import RealPenError
-from ..paths import default_store
-from . import app
-from .common import console
+from realpen.errors import RealPenError
+from realpen.io.paths import default_store
+from realpen.cli import app
+from realpen.cli.common import console
 
 TACTILE_CHOICES = ("audio", "none")
 
@@ -51,9 +51,9 @@ def serve(
                              "request then needs the random token in the printed URL."),
 ) -> None:
     """Start the live app: open the printed URL, pick a pen, and write."""
-    from ..live.app import LiveSettings, create_app
-    from ..live.auth import LOOPBACK_HOSTS, new_token
-    from ..live.server import bind, lan_address, run, url_host
+    from realpen.live.app import LiveSettings, create_app
+    from realpen.live.auth import LOOPBACK_HOSTS, new_token
+    from realpen.live.server import bind, lan_address, run, url_host
 
     if tactile not in TACTILE_CHOICES:
         raise RealPenError(f"--tactile: choose audio or none, got '{tactile}'")
@@ -114,7 +114,7 @@ def export(
                                "`realpen sound render`."),
 ) -> None:
     """Write the stored strokes as CSV: stroke, pen, modality, …, t, x, y, pressure, tilt, speed."""
-    from ..live.store import export_csv
+    from realpen.live.store import export_csv
 
     store = store or default_store()
     strokes, rows = export_csv(store, output, stroke)

@@ -8,15 +8,15 @@ from typing import Optional
 import numpy as np
 import typer
 
-from ..coupling import FIXABLE, Coupling, fit_coupling, load_measurements
-from ..errors import RealPenError, fail
-from ..fileio import json_text, wav_bytes, write_files
-from ..granular import GRAIN_MS, LENGTH_MS, MAX_LENGTH_MS, granular_loop
-from ..sound import (CROSSFADE_MS, DEFAULT_RATE, MAX_RATE, MIN_RATE, REFERENCE_DBFS, UNIT_MS,
+from realpen.sound.coupling import FIXABLE, Coupling, fit_coupling, load_measurements
+from realpen.errors import RealPenError, fail
+from realpen.io.files import json_text, wav_bytes, write_files
+from realpen.sound.granular import GRAIN_MS, LENGTH_MS, MAX_LENGTH_MS, granular_loop
+from realpen.sound.loop import (CROSSFADE_MS, DEFAULT_RATE, MAX_RATE, MIN_RATE, REFERENCE_DBFS, UNIT_MS,
                      check_level, check_ms, find_loop_unit, load_sound)
-from ..stroke import MODES, load_trajectory, render_stroke
-from . import app
-from .common import console, progress_bar
+from realpen.sound.stroke import MODES, load_trajectory, render_stroke
+from realpen.cli import app
+from realpen.cli.common import console, progress_bar
 
 sound_app = typer.Typer(
     help="Friction sound: seamless loop units, the pressure/speed coupling (Eq. 1), and what a "

@@ -9,13 +9,14 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from ..actuator import parse_actuator
-from ..fileio import json_text, wav_bytes, write_files, write_json
-from ..recording import load_recording, prepare
-from ..spectrum import analyze as analyze_signal
-from ..tactile import CONDITIONS, TactileParams, build_pattern
-from . import app
-from .common import PROGRESS_AFTER_S, console, progress_bar
+from realpen.tactile.actuator import parse_actuator
+from realpen.io.files import json_text, wav_bytes, write_files, write_json
+from realpen.io.recording import load_recording
+from realpen.dsp.filters import prepare
+from realpen.dsp.spectrum import analyze as analyze_signal
+from realpen.tactile.pattern import CONDITIONS, TactileParams, build_pattern
+from realpen.cli import app
+from realpen.cli.common import PROGRESS_AFTER_S, console, progress_bar
 
 AXIS_HELP = "How axes become one: dft321 (default for several axes), magnitude, or x|y|z."
 

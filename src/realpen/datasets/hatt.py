@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from ..errors import fail
-from ..fileio import sha256_of
-from ..fileio import check_readable_file
-from ..recording import Recording
+from realpen.errors import fail
+from realpen.io.files import sha256_of
+from realpen.io.files import check_readable_file
+from realpen.io.recording import Recording
 
 
 @dataclass(frozen=True, eq=False)

@@ -18,11 +18,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
 
-from ..errors import RealPenError, fail
-from ..fileio import atomic_path
-from ..profile import PenProfile
-from . import ahap, android, c_header, haptic, hjif, wav
-from .base import Export
+from realpen.errors import RealPenError, fail
+from realpen.io.files import atomic_path
+from realpen.profile.bundle import PenProfile
+from realpen.exports import ahap, android, c_header, haptic, hjif, wav
+from realpen.exports.base import Export
 
 FORMATS: dict[str, ModuleType] = {
     "wav": wav,

@@ -38,10 +38,10 @@ import math
 import numpy as np
 import soundfile as sf
 
-from .. import __version__
-from ..profile import PenProfile
-from . import envelope as env
-from .base import Export, check_repeats
+from realpen import __version__
+from realpen.profile.bundle import PenProfile
+from realpen.exports import envelope as env
+from realpen.exports.base import Export, check_repeats
 
 SUFFIX = ".ahap"
 MAX_CURVE_POINTS = 16

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.signal import resample_poly
 
-from ..errors import RealPenError
+from realpen.errors import RealPenError
 
 MAX_REPEATS = 100  # 150 s of a 1.5 s pattern; players loop, files need not
 

@@ -20,9 +20,9 @@ import re
 
 import numpy as np
 
-from .. import __version__
-from ..profile import PenProfile
-from .base import Export, resample_loop
+from realpen import __version__
+from realpen.profile.bundle import PenProfile
+from realpen.exports.base import Export, resample_loop
 
 SUFFIX = ".h"
 MID_SCALE = 2048

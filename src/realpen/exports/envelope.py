@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import fail
+from realpen.errors import fail
 
 FRAME_MS = 10.0  # short enough for the beating between components, long enough to average
 WINDOW_MS = 40.0  # centroid window: 25 Hz resolution before zero padding

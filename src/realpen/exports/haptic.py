@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import json
 
-from .. import __version__
-from ..profile import PenProfile
-from . import envelope as env
-from .base import Export, check_repeats
+from realpen import __version__
+from realpen.profile.bundle import PenProfile
+from realpen.exports import envelope as env
+from realpen.exports.base import Export, check_repeats
 
 SUFFIX = ".haptic"
 LIMITS = (

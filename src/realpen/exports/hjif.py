@@ -52,9 +52,9 @@ import json
 
 import numpy as np
 
-from .. import __version__
-from ..profile import ComponentEntry, PenProfile
-from .base import Export, check_repeats
+from realpen import __version__
+from realpen.profile.bundle import ComponentEntry, PenProfile
+from realpen.exports.base import Export, check_repeats
 
 SUFFIX = ".hjif"
 MAX_TIMESCALE = 48000

@@ -22,10 +22,10 @@ import math
 
 import numpy as np
 
-from ..errors import RealPenError
-from ..fileio import wav_bytes
-from ..profile import PenProfile
-from .base import Export, check_repeats, resample_loop
+from realpen.errors import RealPenError
+from realpen.io.files import wav_bytes
+from realpen.profile.bundle import PenProfile
+from realpen.exports.base import Export, check_repeats, resample_loop
 
 SUFFIX = ".wav"
 MAX_COMMON_S = 60.0

@@ -25,14 +25,14 @@ from fastapi import FastAPI, HTTPException, Query, WebSocket, WebSocketDisconnec
 from fastapi.responses import HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 
-from .. import __version__
-from ..paths import default_store
-from .auth import LOOPBACK_HOSTS, AccessGuard
-from .catalog import Catalog
-from .device import PenDevice, SimulatedDevice
-from .messages import MAX_MESSAGE_BYTES, MAX_SAMPLES, MODALITIES, PROTOCOL
-from .session import Session
-from .store import StrokeStore
+from realpen import __version__
+from realpen.io.paths import default_store
+from realpen.live.auth import LOOPBACK_HOSTS, AccessGuard
+from realpen.live.catalog import Catalog
+from realpen.live.device import PenDevice, SimulatedDevice
+from realpen.live.messages import MAX_MESSAGE_BYTES, MAX_SAMPLES, MODALITIES, PROTOCOL
+from realpen.live.session import Session
+from realpen.live.store import StrokeStore
 
 STATIC_DIR = Path(str(files(__package__) / "static"))
 NO_CACHE = {"Cache-Control": "no-cache"}

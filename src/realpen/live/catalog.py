@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import RealPenError, fail
-from ..exports.base import resample_loop
-from ..fileio import wav_bytes
-from ..pens import BUNDLED_PENS
-from ..profile import PenProfile, list_profiles, load_profile
+from realpen.errors import RealPenError, fail
+from realpen.exports.base import resample_loop
+from realpen.io.files import wav_bytes
+from realpen.pens import BUNDLED_PENS
+from realpen.profile.bundle import PenProfile, list_profiles, load_profile
 
 MIN_WAV_RATE = 3000  # browsers' decodeAudioData refuses WAVs below 3 kHz (Chrome, the spec's floor)
 

@@ -23,7 +23,7 @@ from collections import deque
 from dataclasses import asdict, dataclass, field
 from typing import Literal, Protocol
 
-from ..profile import PenProfile
+from realpen.profile.bundle import PenProfile
 
 LOG_LIMIT = 100_000  # entries kept; older ones are dropped (their indices stay counted)
 

@@ -30,7 +30,7 @@ from typing import Annotated, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
-from ..profile import NAME_PATTERN
+from realpen.profile.bundle import NAME_PATTERN
 
 PROTOCOL = 1
 MAX_MESSAGE_BYTES = 64 * 1024

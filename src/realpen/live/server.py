@@ -12,7 +12,7 @@ import socket
 
 import uvicorn
 
-from ..errors import RealPenError
+from realpen.errors import RealPenError
 
 WS_MAX_FRAME = 1024 * 1024  # frames above this are refused by the protocol layer (close 1009)
 

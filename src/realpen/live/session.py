@@ -18,11 +18,11 @@ import time
 import uuid
 from dataclasses import dataclass
 
-from .catalog import Catalog
-from .device import Origin, PenDevice
-from .messages import (MAX_MESSAGE_BYTES, Ack, Error, Gain, Hello, MessageError, PenDown,
+from realpen.live.catalog import Catalog
+from realpen.live.device import Origin, PenDevice
+from realpen.live.messages import (MAX_MESSAGE_BYTES, Ack, Error, Gain, Hello, MessageError, PenDown,
                        PenUp, Samples, parse_message)
-from .store import StrokeStore
+from realpen.live.store import StrokeStore
 
 log = logging.getLogger(__name__)
 TACTILE_MODALITIES = ("tactile", "auditory-tactile")

@@ -27,8 +27,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Iterable, Sequence
 
-from ..errors import fail
-from ..fileio import atomic_path
+from realpen.errors import fail
+from realpen.io.files import atomic_path
 
 SCHEMA_VERSION = 1
 CHECKPOINT_S = 1.0

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..actuator import parse_actuator
-from ..fileio import write_wav
-from ..profile import PenProfile, build_profile
-from ..recording import load_recording
-from ..sound import load_sound
-from .model import PENS, PaperModel, friction_sound, vibration
+from realpen.tactile.actuator import parse_actuator
+from realpen.io.files import write_wav
+from realpen.profile.bundle import PenProfile, build_profile
+from realpen.io.recording import load_recording
+from realpen.sound.loop import load_sound
+from realpen.pens.model import PENS, PaperModel, friction_sound, vibration
 
 MODEL_SEED = 2016
 

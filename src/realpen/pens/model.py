@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import signal
 
-from ..recording import Recording
+from realpen.io.recording import Recording
 
 VIBRATION_RATE = 1344.0  # Hz, the method's accelerometer rate
 SOUND_RATE = 48000  # Hz

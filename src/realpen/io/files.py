@@ -18,7 +18,7 @@ import numpy as np
 import soundfile as sf
 from scipy.io import wavfile
 
-from .errors import fail
+from realpen.errors import fail
 
 
 @contextlib.contextmanager

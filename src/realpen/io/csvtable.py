@@ -13,8 +13,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import fail
-from .fileio import check_readable_file
+from realpen.errors import fail
+from realpen.io.files import check_readable_file
 
 
 @dataclass(frozen=True)

@@ -31,14 +31,14 @@ import numpy as np
 import soundfile as sf
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from . import __version__
-from .actuator import Actuator
-from .coupling import Coupling
-from .errors import RealPenError, fail
-from .fileio import atomic_path, current_umask, wav_bytes
-from .recording import Recording
-from .sound import find_loop_unit
-from .tactile import Pattern, TactileParams, build_pattern
+from realpen import __version__
+from realpen.tactile.actuator import Actuator
+from realpen.sound.coupling import Coupling
+from realpen.errors import RealPenError, fail
+from realpen.io.files import atomic_path, current_umask, wav_bytes
+from realpen.io.recording import Recording
+from realpen.sound.loop import find_loop_unit
+from realpen.tactile.pattern import Pattern, TactileParams, build_pattern
 
 FORMAT = 1
 PROFILE_JSON, TACTILE_WAV, SOUND_WAV = "profile.json", "tactile.wav", "sound.wav"
@@ -363,8 +363,8 @@ def load_profile(path: str | os.PathLike) -> PenProfile:
 
 def profile_locations(extra: list[Path] | None = None) -> list[tuple[str, Path]]:
     """Where profiles are looked for, in order: ("bundled", folder), ("user", folder), extras."""
-    from .paths import user_profiles_dir
-    from .pens import bundled_dir
+    from realpen.io.paths import user_profiles_dir
+    from realpen.pens import bundled_dir
 
     places = [("bundled", bundled_dir()), ("user", user_profiles_dir())]
     places += [("extra", Path(p)) for p in (extra or [])]

@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import RealPenError, fail
-from .csvtable import is_number
-from .fileio import sha256_of
+from realpen.errors import RealPenError, fail
+from realpen.io.csvtable import is_number
+from realpen.io.files import sha256_of
 
 MODEL_DEFAULTS = {"lra": {"f0": 175.0, "q": 8.0}, "piezo": {"f0": 300.0, "q": 2.0}, "flat": {}}
 

@@ -45,9 +45,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 from scipy import optimize, signal
 
-from .csvtable import read_table
-from .errors import RealPenError, fail
-from .fileio import check_readable_file, write_json
+from realpen.io.csvtable import read_table
+from realpen.errors import RealPenError, fail
+from realpen.io.files import check_readable_file, write_json
 
 FORMAT = "realpen.coupling/1"
 FIXABLE = ("c_ov", "c_op")

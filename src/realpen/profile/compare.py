@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from .profile import PenProfile
+from realpen.profile.bundle import PenProfile
 
 BAND_HZ = (30.0, 700.0)
 

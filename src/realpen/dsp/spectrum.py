@@ -16,7 +16,7 @@ import numpy as np
 from scipy import signal
 from scipy.ndimage import maximum_filter1d
 
-from .errors import RealPenError, require_number
+from realpen.errors import RealPenError, require_number
 
 ProgressCallback = Callable[[int, int], None]
 SELECTIONS = ("stationary", "middle")

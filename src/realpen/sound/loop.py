@@ -46,9 +46,10 @@ from typing import Callable
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from . import __version__
-from .errors import RealPenError, fail
-from .recording import Recording, load_recording, resample
+from realpen import __version__
+from realpen.errors import RealPenError, fail
+from realpen.io.recording import Recording, load_recording
+from realpen.dsp.filters import resample
 
 DEFAULT_RATE = 48000
 UNIT_MS = 300.0

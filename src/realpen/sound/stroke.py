@@ -33,11 +33,11 @@ from typing import Sequence
 
 import numpy as np
 
-from .coupling import Coupling
-from .csvtable import read_table
-from .errors import RealPenError, fail
-from .granular import GRAIN_MS, SteadyPart, granular, grain_samples, steady_part
-from .sound import (CROSSFADE_MS, REFERENCE_DBFS, UNIT_MS, LoopUnit, ProgressCallback,
+from realpen.sound.coupling import Coupling
+from realpen.io.csvtable import read_table
+from realpen.errors import RealPenError, fail
+from realpen.sound.granular import GRAIN_MS, SteadyPart, granular, grain_samples, steady_part
+from realpen.sound.loop import (CROSSFADE_MS, REFERENCE_DBFS, UNIT_MS, LoopUnit, ProgressCallback,
                     check_level, check_ms, check_rate, find_loop_unit, normalise, require_sound,
                     samples_for)
 

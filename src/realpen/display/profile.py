@@ -13,9 +13,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import signal  # noqa: E402
 
-from .errors import fail  # noqa: E402
-from .fileio import atomic_path  # noqa: E402
-from .profile import PenProfile  # noqa: E402
+from realpen.errors import fail  # noqa: E402
+from realpen.io.files import atomic_path  # noqa: E402
+from realpen.profile.bundle import PenProfile  # noqa: E402
 
 
 def profile_figure(profile: PenProfile) -> "matplotlib.figure.Figure":

@@ -19,12 +19,13 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from . import __version__
-from .actuator import Actuator, weighting
-from .errors import RealPenError, require_number
-from .recording import Recording, prepare
-from .spectrum import Analysis, ProgressCallback, analyze
-from .tracks import continuous_phases, joins, link_components
+from realpen import __version__
+from realpen.tactile.actuator import Actuator, weighting
+from realpen.errors import RealPenError, require_number
+from realpen.io.recording import Recording
+from realpen.dsp.filters import prepare
+from realpen.dsp.spectrum import Analysis, ProgressCallback, analyze
+from realpen.dsp.tracks import continuous_phases, joins, link_components
 
 # Study 1 conditions: (principal frequencies, sub-patterns, unit length in ms).
 CONDITIONS: dict[str, tuple[int, int, float]] = {

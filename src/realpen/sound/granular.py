@@ -22,10 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from . import __version__
-from .errors import RealPenError, fail
-from .recording import Recording
-from .sound import (EDGE_MS, HOP_MS, REFERENCE_DBFS, SILENCE_DB, Seam, check_level, check_ms,
+from realpen import __version__
+from realpen.errors import RealPenError, fail
+from realpen.io.recording import Recording
+from realpen.sound.loop import (EDGE_MS, HOP_MS, REFERENCE_DBFS, SILENCE_DB, Seam, check_level, check_ms,
                     check_rate, level_db, require_sound, samples_for, seam_report)
 
 GRAIN_MS = 50.0

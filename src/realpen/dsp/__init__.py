@@ -1,0 +1,8 @@
+"""Signal processing: DFT321, resampling and filters, unit spectra, peak picking, tracks.
+
+Lives here: :mod:`~realpen.dsp.filters` (axes to one, resampling, zero-phase high-pass,
+:func:`prepare`), :mod:`~realpen.dsp.spectrum` (unit sequences, principal frequencies, the
+choice of units), :mod:`~realpen.dsp.tracks` (frequency tracks across sub-patterns).
+
+May import: :mod:`realpen.errors`, :mod:`realpen.io`. Never a higher layer.
+"""

@@ -1,0 +1,138 @@
+"""Preprocessing of vibration recordings: DFT321, polyphase resampling, zero-phase high-pass.
+
+The method's chain is axes → one signal (DFT321) → optional resampling → 30 Hz high-pass;
+:func:`prepare` runs it and refuses a result that is silence.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+from scipy import fft as sp_fft
+from scipy import signal
+
+from realpen.errors import RealPenError, fail, require_number
+from realpen.io.recording import AXIS_CHOICES, Recording
+
+def dft321(samples: np.ndarray) -> np.ndarray:
+    """Combine axes into one signal by DFT321 (Landin et al., 2010).
+
+    Per frequency bin the result has magnitude √Σ|U_i|² and the phase of ΣU_i, so the summed
+    spectral energy of the axes is kept exactly.
+
+    Args:
+        samples: shape (frames, axes).
+
+    Returns:
+        shape (frames,), same unit as the input.
+    """
+    axes = np.ascontiguousarray(np.asarray(samples, dtype=np.float64).T)
+    frames = axes.shape[1]
+    spectra = sp_fft.rfft(axes, axis=1)
+    magnitude = np.sqrt(np.sum(spectra.real ** 2 + spectra.imag ** 2, axis=0))
+    summed = spectra.sum(axis=0)
+    summed_magnitude = np.abs(summed)
+    # Where the axes cancel exactly the phase is undefined; take zero phase there.
+    direction = np.divide(summed, summed_magnitude, out=np.ones_like(summed),
+                          where=summed_magnitude > 0)
+    return sp_fft.irfft(magnitude * direction, n=frames)
+
+
+def combine_axes(recording: Recording, axis: str | None = None) -> Recording:
+    """Reduce a recording to one axis.
+
+    Args:
+        axis: ``"dft321"`` (default for more than one axis), ``"magnitude"`` (Euclidean norm
+            per frame, mean removed), or an axis name; ``"x"``, ``"y"``, ``"z"`` also pick the
+            first, second and third column when no column has that name.
+    """
+    count = recording.samples.shape[1]
+    if axis is None:
+        axis = "dft321" if count > 1 else recording.axes[0]
+    if axis == "dft321":
+        combined = dft321(recording.samples) if count > 1 else recording.samples[:, 0]
+    elif axis == "magnitude":
+        combined = np.linalg.norm(recording.samples, axis=1)
+        combined = combined - combined.mean()
+    elif axis in recording.axes:
+        combined = recording.samples[:, recording.axes.index(axis)]
+    elif axis in ("x", "y", "z") and "xyz".index(axis) < count:
+        # Columns named otherwise (ax, acc_y, ...) are taken in order: x first, then y, z.
+        combined = recording.samples[:, "xyz".index(axis)]
+    else:
+        raise fail(recording.source, f"no axis '{axis}' (axes: {', '.join(recording.axes)}; "
+                                     f"or dft321, magnitude)")
+    return recording.with_samples(combined[:, None], f"axis:{axis}", axes=(axis,))
+
+
+def resample(recording: Recording, rate: float) -> Recording:
+    """Resample to ``rate`` Hz with a polyphase filter (scipy.signal.resample_poly).
+
+    The ratio is approximated to a fraction with a denominator ≤ 1000; the exact rate reached is
+    the returned recording's ``rate``.
+    """
+    require_number("--analysis-rate", rate, minimum=0.0, inclusive=False)
+    if abs(rate - recording.rate) < 1e-9:
+        return recording
+    ratio = Fraction(rate / recording.rate).limit_denominator(1000)
+    if ratio.numerator == 0:
+        raise RealPenError(f"--analysis-rate: {rate:g} Hz is too low to resample "
+                           f"{recording.rate:g} Hz to")
+    out = signal.resample_poly(recording.samples, ratio.numerator, ratio.denominator, axis=0)
+    actual = recording.rate * ratio.numerator / ratio.denominator
+    return recording.with_samples(out, f"resample:{actual:g}Hz", rate=actual)
+
+
+def highpass(recording: Recording, cutoff_hz: float = 30.0, order: int = 4) -> Recording:
+    """Zero-phase Butterworth high-pass (forward-backward, so the effective order is doubled).
+
+    Raises:
+        RealPenError: when the rate is too low for the cutoff (Nyquist at or below it).
+    """
+    require_number("--highpass", cutoff_hz, minimum=0.0)
+    nyquist = recording.rate / 2
+    if cutoff_hz == 0:
+        return recording
+    if cutoff_hz >= nyquist:
+        raise fail(recording.source, f"rate {recording.rate:g} Hz is too low for a "
+                                     f"{cutoff_hz:g} Hz high-pass (Nyquist {nyquist:g} Hz)")
+    sos = signal.butter(order, cutoff_hz, btype="highpass", fs=recording.rate, output="sos")
+    padlen = min(3 * (2 * len(sos) + 1), recording.samples.shape[0] - 1)
+    filtered = signal.sosfiltfilt(sos, recording.samples, axis=0, padlen=max(padlen, 0))
+    return recording.with_samples(filtered, f"highpass:{cutoff_hz:g}Hz")
+
+
+def prepare(recording: Recording, axis: str | None = None, rate: float | None = None,
+            highpass_hz: float = 30.0) -> Recording:
+    """The method's preprocessing: axes to one, optional resampling, zero-phase high-pass.
+
+    Args:
+        axis: see :func:`combine_axes` (None: DFT321 for several axes).
+        rate: analysis rate in Hz (None: keep the recording's rate).
+        highpass_hz: high-pass cutoff in Hz (0: none).
+    """
+    if axis is not None and axis not in AXIS_CHOICES and axis not in recording.axes:
+        raise RealPenError(f"--axis: unknown axis '{axis}' (choose from {', '.join(AXIS_CHOICES)})")
+    one = combine_axes(recording, axis)
+    if rate is not None:
+        one = resample(one, rate)
+    filtered = highpass(one, highpass_hz)
+    _check_not_silent(recording, filtered)
+    return filtered
+
+
+SILENCE_DB = -80.0  # vibration this far below the input's peak (offset included) is no signal
+
+
+def _check_not_silent(raw: Recording, filtered: Recording) -> None:
+    """Refuse input whose filtered part is silence: zeros, a constant, or quantisation noise.
+
+    Judged relative to the input's own peak, so an accelerometer's gravity offset does not
+    hide a silent pen, and ±1 LSB of noise on a constant is not mistaken for vibration.
+    """
+    peak = float(np.max(np.abs(raw.samples)))
+    level = float(np.sqrt(np.mean(filtered.samples ** 2)))
+    if peak == 0 or level <= peak * 10 ** (SILENCE_DB / 20):
+        raise fail(raw.source, "signal is silent or constant (no vibration above "
+                               f"{SILENCE_DB:g} dB of its peak after the high-pass)")
