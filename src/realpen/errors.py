@@ -1,12 +1,38 @@
-"""The one exception type that the command line turns into a one-line message and exit code 2."""
+"""RealPen's two exception types; the command line turns either into one line and exit code 2.
+
+- :class:`RealPenError` — bad *data*: a file or a recording that cannot be used. The message
+  names the source and the problem, e.g. ``"take1.wav: file is empty"``.
+- :class:`ParameterError` — a bad *argument* to a library function. The message names the
+  Python parameter, e.g. ``"unit_ms: must be > 0, got -1"``; the command line maps parameter
+  names to its flags in one place (:mod:`realpen.cli.flags`). It is also a :class:`ValueError`,
+  so code that catches ``ValueError`` keeps working.
+
+Programming errors are never wrapped in either.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["RealPenError", "ParameterError", "fail", "require_number", "require_choice"]
 
 
 class RealPenError(Exception):
-    """A problem with the user's input (a file, a parameter) that can be said in one line.
+    """A problem with the user's input (a file, a recording) that can be said in one line."""
 
-    The message names the file or the parameter and the problem, e.g.
-    ``"take1.wav: file is empty"``. Programming errors are never wrapped in it.
+
+class ParameterError(RealPenError, ValueError):
+    """A bad argument, worded with the Python parameter's name.
+
+    Attributes:
+        parameter: the parameter's Python name (``"unit_ms"``).
+        problem: what is wrong with it, without the name (``"must be > 0, got -1"``).
     """
+
+    def __init__(self, parameter: str, problem: str):
+        super().__init__(f"{parameter}: {problem}")
+        self.parameter = parameter
+        self.problem = problem
 
 
 def fail(source: object, problem: str) -> RealPenError:
@@ -14,18 +40,28 @@ def fail(source: object, problem: str) -> RealPenError:
     return RealPenError(f"{source}: {problem}")
 
 
-def require_number(option: str, value: float, minimum: float | None = None,
+def require_number(parameter: str, value: float, minimum: float | None = None,
                    maximum: float | None = None, inclusive: bool = True) -> None:
-    """Raise a one-line :class:`RealPenError` unless ``value`` is finite and within bounds.
+    """Raise a :class:`ParameterError` unless ``value`` is a finite number within bounds.
 
     ``minimum`` is inclusive unless ``inclusive`` is false; ``maximum`` is always inclusive.
-    """
-    import math
+    Booleans are refused (``True`` is not a count).
 
-    if not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise RealPenError(f"{option} must be a finite number, got {value}")
+    >>> require_number("top", 0, minimum=1)
+    Traceback (most recent call last):
+    ...
+    realpen.errors.ParameterError: top: must be >= 1, got 0
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ParameterError(parameter, f"must be a finite number, got {value!r}")
     if minimum is not None and (value < minimum or (not inclusive and value == minimum)):
         relation = ">=" if inclusive else ">"
-        raise RealPenError(f"{option} must be {relation} {minimum:g}, got {value:g}")
+        raise ParameterError(parameter, f"must be {relation} {minimum:g}, got {value:g}")
     if maximum is not None and value > maximum:
-        raise RealPenError(f"{option} must be <= {maximum:g}, got {value:g}")
+        raise ParameterError(parameter, f"must be <= {maximum:g}, got {value:g}")
+
+
+def require_choice(parameter: str, value: object, choices: tuple[str, ...]) -> None:
+    """Raise a :class:`ParameterError` unless ``value`` is one of ``choices``."""
+    if value not in choices:
+        raise ParameterError(parameter, f"unknown value {value!r} (choose from {', '.join(choices)})")
