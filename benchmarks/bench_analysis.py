@@ -19,9 +19,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from realpen.io.recording import Recording  # noqa: E402
 from realpen.dsp.filters import prepare  # noqa: E402
 from realpen.dsp.spectrum import analyze  # noqa: E402
+from realpen.io.recording import Recording  # noqa: E402
 
 RATE = 1344.0
 

@@ -38,7 +38,7 @@ import httpx
 import numpy as np
 from websockets.sync.client import connect
 
-from realpen.profile.bundle import resolve_profile
+from realpen.profile import resolve_profile
 
 TARGET_MS = 5.0
 CHROMIUM = Path("/usr/bin/chromium")

@@ -2,7 +2,8 @@
 
 The model (``realpen.pens.model``) writes a vibration recording and a friction-sound recording
 per pen; those go through exactly the pipeline of ``realpen profile build``. The model is
-seeded, so running this again gives byte-identical bundles.
+seeded, so running this again on the same machine gives byte-identical bundles (on another, equal
+within the tolerances of ``tests/test_profile.py``, with the same canonical profile version).
 
 Usage: python scripts/make_bundled_pens.py [OUT_DIR]   (default: src/realpen/pens/bundled)
 """
@@ -13,7 +14,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from realpen.pens import BUNDLED_PENS, BUNDLE_ACTUATOR, bundled_dir
+from realpen.pens import BUNDLE_ACTUATOR, BUNDLED_PENS, bundled_dir
 from realpen.pens.build import build_modelled_pen
 from realpen.profile.bundle import save_profile
 

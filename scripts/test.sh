@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Set up a virtual environment with RealPen and its test dependencies, then run every test.
+# Set up a virtual environment with RealPen and its test dependencies, lint, then run every test.
 # Usage: bash scripts/test.sh [pytest arguments]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,4 +15,6 @@ if [ ! -x /usr/bin/chromium ]; then
              "the browser tests will be skipped (install the Debian package 'chromium')." >&2
     fi
 fi
+# Lint first: the rules are in pyproject.toml ([tool.ruff]); any finding stops the run.
+.venv/bin/ruff check --no-cache .
 exec .venv/bin/python -m pytest "$@"

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-import hashlib
+import dataclasses
 import os
 import re
 import select
@@ -11,15 +11,14 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
 from realpen.exports.base import resample_loop
-from realpen.io.files import wav_bytes
-from realpen.profile.bundle import PenProfile, resolve_profile, save_profile
+from realpen.profile import PenProfile, resolve_profile, save_profile
 
 URL_LINE = re.compile(r"RealPen live: (http://\S+)")
 
@@ -96,9 +95,7 @@ def low_rate_profile(folder: Path, name: str = "slowpen", rate: int = 2000) -> P
     pencil = resolve_profile("pencil")
     tactile = resample_loop(pencil.tactile, pencil.meta.tactile.rate, rate)
     tactile = (tactile / np.max(np.abs(tactile))).astype(np.float32)
-    section = pencil.meta.tactile.model_copy(update={
-        "rate": rate, "frames": len(tactile),
-        "sha256": hashlib.sha256(wav_bytes(tactile, rate)).hexdigest()})
+    section = dataclasses.replace(pencil.meta.tactile, rate=rate)  # save_profile hashes the WAVs
     meta = pencil.meta.model_copy(update={"name": name, "tool": "slow pen", "tactile": section})
     return save_profile(PenProfile(meta, tactile, pencil.sound), folder / name)
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from realpen.tactile.actuator import load_measured, parse_actuator, weighting
-from realpen.errors import RealPenError
+from realpen.errors import ParameterError, RealPenError
+from realpen.tactile.actuator import Actuator, as_actuator, load_measured, parse_actuator, weighting
 
 
 def test_lra_model_is_a_second_order_bandpass():
@@ -34,8 +34,9 @@ def test_piezo_and_flat():
     ("voicecoil", "unknown actuator"),
 ])
 def test_bad_specs(spec, message):
-    with pytest.raises(RealPenError, match=message):
+    with pytest.raises(ParameterError, match=message) as info:
         parse_actuator(spec)
+    assert info.value.parameter == "actuator" and "--" not in str(info.value)
 
 
 def test_measured_csv_linear_and_db(tmp_path):
@@ -77,3 +78,50 @@ def test_weighting_equalises_and_caps():
     assert result.clipped.tolist() == [False, False, False, True, False]
     assert result.weights[3] == pytest.approx(10.0)
     assert np.isnan(result.weights[4])
+
+
+def test_json_round_trip_model_and_measured(tmp_path):
+    for spec in ("lra:f0=175,q=8", "piezo:f0=300,q=2", "flat"):
+        act = parse_actuator(spec)
+        data = act.to_json()
+        assert data == {"spec": act.spec, "kind": act.kind, "params": act.params}
+        assert Actuator.from_json(data) == act
+    csv = tmp_path / "measured.csv"
+    csv.write_text("frequency_hz,response\n50,0.1\n100,0.5\n200,1.0\n400,0.25\n")
+    measured = parse_actuator(str(csv))
+    data = measured.to_json()
+    assert data["table_hz"] == [50.0, 100.0, 200.0, 400.0] and len(data["params"]["sha256"]) == 64
+    again = Actuator.from_json(data)
+    assert again == measured and hash(again) == hash(measured)
+    assert again.response(150.0) == pytest.approx(measured.response(150.0))
+    # The format-1 profile section (model actuators with null tables) reads the same.
+    old = {"spec": "lra:f0=175,q=8", "kind": "lra", "params": {"f0": 175.0, "q": 8.0},
+           "table_hz": None, "table_response": None}
+    assert Actuator.from_json(old) == parse_actuator("lra:f0=175,q=8")
+
+
+@pytest.mark.parametrize("data", [
+    {"spec": "x", "kind": "voicecoil"},
+    {"spec": "lra", "kind": "lra", "params": {"f0": -1, "q": 8}},
+    {"spec": "lra", "kind": "lra", "params": {"f0": 175}},
+    {"spec": "m.csv", "kind": "measured", "table_hz": [100, 50], "table_response": [1, 1]},
+    {"spec": "flat", "kind": "flat", "colour": "red"},
+    "lra:f0=175,q=8",
+])
+def test_from_json_refuses_malformed_documents(data):
+    with pytest.raises(ParameterError) as info:
+        Actuator.from_json(data)
+    assert info.value.parameter == "actuator"
+
+
+def test_repr_as_actuator_and_cap(tmp_path):
+    assert repr(parse_actuator("lra")) == "Actuator('lra:f0=175,q=8')"
+    csv = tmp_path / "a.csv"
+    csv.write_text("hz,response\n50,0.1\n400,1\n")
+    text = repr(parse_actuator(str(csv)))
+    assert text == "Actuator(measured 'a.csv', 2 points, 50–400 Hz)" and len(text) < 200
+    assert as_actuator("flat") == parse_actuator("flat")
+    with pytest.raises(ParameterError, match="^actuator:"):
+        as_actuator(175)
+    with pytest.raises(ParameterError, match="^cap_db:"):
+        weighting("flat", np.array([100.0]), (30.0, 600.0), cap_db=-1)

@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 import soundfile as sf
-
 from conftest import assert_clean_failure, run_cli
-from realpen.examples import example_recording_path
 from signals import sines
+
+from realpen.examples import example_recording_path
 
 EXAMPLE = example_recording_path()
 
@@ -82,7 +82,8 @@ def write_case(tmp_path, case):
                   "non_monotonic_actuator", "unknown_condition"):
         rate = 40 if case == "low_rate" else 1344
         duration = 1.0 if case == "short" else 3.0
-        x = sines([100], [1], rate, duration) if case not in ("silent", "constant") else np.zeros(int(rate * duration))
+        x = (sines([100], [1], rate, duration) if case not in ("silent", "constant")
+             else np.zeros(int(rate * duration)))
         if case == "constant":
             x = x + 0.5
         sf.write(rec, x, rate, subtype="FLOAT")
@@ -197,3 +198,94 @@ def test_csv_hint_names_the_right_option(tmp_path):
     rec.write_text("ax,ay\n" + "\n".join("1,2" for _ in range(10)))
     assert_clean_failure(run_cli("tactile", rec, "-o", tmp_path / "o.wav"), "--input-rate")
     assert_clean_failure(run_cli("analyze", rec), "--rate")
+
+
+# --- Python names in the library, flags on the command line ----------------------------------
+
+def test_the_library_names_the_parameter_the_command_line_names_the_flag():
+    from realpen.dsp.spectrum import analyze as analyze_signal
+    from realpen.errors import ParameterError
+
+    with pytest.raises(ParameterError) as caught:
+        analyze_signal(sines([100], [1], 1344, 3.0), 1344, unit_ms=-1)
+    assert str(caught.value) == "unit_ms: must be > 0, got -1"
+    assert "--unit-ms" not in str(caught.value)
+    result = run_cli("analyze", EXAMPLE, "--unit-ms", "-1")
+    assert_clean_failure(result, "realpen: error: --unit-ms: must be > 0, got -1")
+    assert "unit_ms" not in result.stderr
+
+
+@pytest.mark.parametrize("options, flag", [
+    (["--top", "0"], "--top: must be >= 1"),
+    (["--subpatterns", "0"], "--subpatterns: must be >= 1"),   # the library's `count`
+    (["--select", "best"], "--select: unknown value 'best'"),  # the library's `selection`
+    (["--highpass", "-1"], "--highpass: must be >= 0"),        # the library's `highpass_hz`
+    (["--analysis-rate", "0"], "--analysis-rate: must be > 0"),
+    (["--axis", "w"], "--axis: unknown value 'w'"),
+])
+def test_analyze_maps_every_library_parameter_to_its_flag(options, flag):
+    assert_clean_failure(run_cli("analyze", EXAMPLE, *options), f"realpen: error: {flag}")
+
+
+def test_the_recording_rate_is_input_rate_for_tactile_and_rate_for_analyze(tmp_path):
+    rec = tmp_path / "rec.csv"
+    rec.write_text("ax\n" + "\n".join(f"{v:.5f}" for v in sines([100], [1], 1344, 3.0)))
+    result = run_cli("tactile", rec, "--input-rate", "-5", "-o", tmp_path / "o.wav")
+    assert_clean_failure(result, "realpen: error: --input-rate: must be > 0, got -5")
+    result = run_cli("analyze", rec, "--rate", "-5")
+    assert_clean_failure(result, "realpen: error: --rate: must be > 0, got -5")
+
+
+# --- analyze --all ---------------------------------------------------------------------------
+
+def table_units(stdout: str) -> list[str]:
+    """The unit column of the printed table (a star marks a selected unit under --all)."""
+    return [line.split("│")[1].strip() for line in stdout.splitlines()
+            if line.startswith("│") and line.split("│")[1].strip().rstrip("*").isdigit()]
+
+
+def test_analyze_prints_the_selected_units_and_with_all_every_unit():
+    selected = run_cli("analyze", EXAMPLE, "--top", "2")
+    assert selected.returncode == 0, selected.stderr
+    units = table_units(selected.stdout)
+    assert len(units) == 15 and not any(u.endswith("*") for u in units)
+    every = run_cli("analyze", EXAMPLE, "--top", "2", "--all")
+    assert every.returncode == 0, every.stderr
+    units = table_units(every.stdout)
+    assert [u.rstrip("*") for u in units] == [str(i) for i in range(120)]
+    assert [u.rstrip("*") for u in units if u.endswith("*")] == table_units(selected.stdout)
+    help_text = " ".join(run_cli("analyze", "--help").stdout.split())
+    assert "selected unit sequences" in help_text and "--all" in help_text
+
+
+# --- an existing output is replaced only with --force ----------------------------------------
+
+def test_tactile_and_analyze_refuse_existing_outputs_before_any_work(tmp_path):
+    wav, js = tmp_path / "p.wav", tmp_path / "p.json"
+    wav.write_bytes(b"keep")
+    # Refused before the recording is read: the missing recording is not what is reported.
+    result = run_cli("tactile", tmp_path / "missing.wav", "-o", wav)
+    assert_clean_failure(result, f"realpen: error: {wav}: exists; pass --force to replace it")
+    js.write_text("{}")
+    result = run_cli("tactile", EXAMPLE, "-o", tmp_path / "new.wav", "--json", js)
+    assert_clean_failure(result, f"{js}: exists; pass --force to replace it")
+    assert not (tmp_path / "new.wav").exists() and wav.read_bytes() == b"keep"
+    result = run_cli("tactile", EXAMPLE, "-o", wav, "--json", js, "--force")
+    assert result.returncode == 0, result.stderr
+    assert sf.info(wav).frames == 12000 and len(json.loads(js.read_text())["subpatterns"]) == 15
+    result = run_cli("analyze", EXAMPLE, "--json", js)
+    assert_clean_failure(result, f"{js}: exists; pass --force to replace it")
+    result = run_cli("analyze", EXAMPLE, "--json", js, "--overwrite")  # the same option
+    assert result.returncode == 0, result.stderr
+    assert len(json.loads(js.read_text())["units"]) == 120
+
+
+def test_an_output_is_never_the_recording_or_another_output(tmp_path):
+    rec = tmp_path / "rec.npz"
+    rec.write_bytes(EXAMPLE.read_bytes())
+    result = run_cli("tactile", rec, "-o", rec, "--force")
+    assert_clean_failure(result, f"{rec}: would replace the recording itself")
+    result = run_cli("tactile", rec, "-o", tmp_path / "a.wav", "--json", tmp_path / "a.wav")
+    assert_clean_failure(result, "given for two outputs")
+    assert rec.read_bytes() == EXAMPLE.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.npz"]

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
+from realpen.errors import ParameterError, RealPenError
 from realpen.sound.coupling import Coupling, fit_coupling, load_measurements, one_pole
-from realpen.errors import RealPenError
 
 TRUTH = dict(c_p=0.8, c_op=0.15, c_x=0.015, c_ov=10.0)
 
@@ -197,8 +197,9 @@ def test_fit_refuses_data_that_cannot_identify_the_constants():
         fit_coupling(speed / 100, speed, 0.01 * speed)
     with pytest.raises(RealPenError, match="at least 4 pen-down rows"):
         fit_coupling([0.5, 0.6, 0.0], [10, 20, 30], [0.1, 0.2, 0.3])
-    with pytest.raises(RealPenError, match="--fix"):
+    with pytest.raises(ParameterError, match="^fix: choose c_ov or c_op") as caught:
         fit_coupling(*measurements(n=20), fix="c_x")
+    assert caught.value.parameter == "fix"
 
 
 def test_load_measurements(tmp_path):
@@ -225,7 +226,7 @@ def test_load_measurements(tmp_path):
 @pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf")])
 def test_fit_refuses_a_held_value_that_is_not_finite(fix, value):
     pressure, speed, amplitude = measurements(seed=7)
-    with pytest.raises(RealPenError, match="--value must be a finite number"):
+    with pytest.raises(ParameterError, match="^value: must be a finite number"):
         fit_coupling(pressure, speed, amplitude, fix, value, source="m.csv")
 
 
@@ -239,7 +240,7 @@ def test_fit_refuses_constants_that_cannot_reproduce_the_fit(fix, value):
         fit_coupling(pressure, speed, amplitude, fix, value, base=Coupling(a_max=10.0),
                      source="m.csv")
     message = str(caught.value)
-    assert message.startswith("m.csv: ") and "\n" not in message
+    assert message.startswith("m.csv: ") and "\n" not in message and "--" not in message
     assert fix in message and f"{value:g}" in message
 
 
@@ -264,3 +265,20 @@ def test_measurement_errors_name_the_file_line(tmp_path):
         with pytest.raises(RealPenError, match=problem) as caught:
             load_measurements(path)
         assert "data row" not in str(caught.value)
+
+
+def test_coupling_and_fit_have_one_line_reprs():
+    fit = fit_coupling(*measurements(seed=8))
+    for item in (Coupling(), fit.coupling):
+        text = repr(item)
+        assert text.startswith("Coupling(c_p=") and "\n" not in text and len(text) < 200, text
+        assert "mm/s" in text
+    assert "c_ov=12 mm/s" in repr(Coupling())
+
+
+def test_measurements_with_semicolons_and_decimal_commas(tmp_path):
+    path = tmp_path / "m.csv"
+    path.write_text("pressure;speed;amplitude\n0,5;10;0,4\n0,6;20,5;0,7\n")
+    pressure, speed, amplitude = load_measurements(path)
+    np.testing.assert_array_equal(pressure, [0.5, 0.6])
+    np.testing.assert_array_equal(speed, [10, 20.5])

@@ -12,16 +12,26 @@ import subprocess
 import numpy as np
 import pytest
 import soundfile as sf
+from conftest import assert_clean_failure, run_cli
 from scipy.signal import resample as fft_resample
 
-from conftest import assert_clean_failure, run_cli
-from realpen.errors import RealPenError
-from realpen.exports import FORMATS, ahap, android, c_header, export_profile, haptic, hjif, render
+from realpen.errors import ParameterError, RealPenError
+from realpen.exports import (
+    FORMATS,
+    ahap,
+    android,
+    c_header,
+    companion_paths,
+    export,
+    export_profile,
+    profile_inputs,
+    render,
+    wav,
+)
 from realpen.exports import envelope as env
-from realpen.exports import wav
 from realpen.exports.base import resample_loop
-from realpen.profile.bundle import resolve_profile
-from realpen.tactile.pattern import synthesize
+from realpen.profile.registry import resolve_profile
+from realpen.tactile.pattern import TactilePattern
 
 PENS = ("pencil", "ballpoint", "marker")
 FRAME_S = 0.010
@@ -47,6 +57,11 @@ def swept(pens):
     level = 0.2 + 0.8 * 0.5 * (1 - np.cos(2 * np.pi * t / period))
     x = 0.9 * level * np.sin(2 * np.pi * freqs[(t // 0.1).astype(int)] * t)
     return dataclasses.replace(base, tactile=x.astype(np.float32)), freqs
+
+
+def doc(fmt: str, item, **options) -> dict:
+    """The JSON document of an export of a profile or a pattern."""
+    return json.loads(render(fmt, item, **options).data)
 
 
 def frame_rms(x: np.ndarray, rate: int) -> tuple[np.ndarray, np.ndarray]:
@@ -132,9 +147,9 @@ def test_loop_curve_spans_the_repeats_and_closes_the_wrap(pens):
 
 def test_wav_mono_is_the_pattern_and_repeats_tile_it(pens):
     profile = pens["pencil"]
-    samples, rate = wav.mono_samples(profile)
+    samples, rate = wav.mono_samples(profile.pattern)
     assert rate == 8000 and np.array_equal(samples, profile.tactile)
-    data = render(profile, "wav", repeats=3).data
+    data = render("wav", profile, repeats=3).data
     read, rate = sf.read(io.BytesIO(data), dtype="float32")
     assert rate == 8000 and np.array_equal(read, np.tile(profile.tactile, 3))
 
@@ -154,15 +169,15 @@ def test_resampled_loop_stays_seamless():
 
 
 def test_resample_refuses_a_rate_that_breaks_the_loop():
-    with pytest.raises(RealPenError, match="--rate: .*whole number of samples"):
+    with pytest.raises(ParameterError, match="^rate: .*whole number of samples"):
         resample_loop(np.zeros(12000), 8000, 44101)
-    with pytest.raises(RealPenError, match="--rate: must be a positive"):
+    with pytest.raises(ParameterError, match="^rate: must be a positive"):
         resample_loop(np.zeros(12000), 8000, 0)
 
 
 def test_wav_stereo_puts_sound_left_and_tactile_right(pens):
     profile = pens["marker"]
-    samples, rate = wav.stereo_samples(profile)
+    samples, rate = wav.stereo_samples(profile.pattern, profile.sound_loop)
     assert rate == 48000 and samples.shape == (72000, 2)  # 1500 ms = 5 × the 300 ms sound unit
     assert np.array_equal(samples[:, 0], np.tile(profile.sound, 5))
     reference = fft_resample(profile.tactile.astype(np.float64), 72000)  # periodic by nature
@@ -174,7 +189,7 @@ def test_wav_stereo_refuses_loops_without_a_common_length(pens):
     profile = pens["pencil"]
     odd = dataclasses.replace(profile, sound=np.concatenate([profile.sound, profile.sound[:1]]))
     with pytest.raises(RealPenError, match="no common length"):
-        wav.stereo_samples(odd)
+        wav.stereo_samples(odd.pattern, odd.sound_loop)
 
 
 # --- c header ------------------------------------------------------------------------------
@@ -238,7 +253,7 @@ def ahap_curve(document: dict, parameter: str) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize("name", PENS)
 def test_ahap_has_the_required_structure(pens, name):
-    document = ahap.build(pens[name], created="2025-01-01")
+    document = doc("ahap", pens[name], created="2025-01-01")
     assert document["Version"] == 1.0 and isinstance(document["Pattern"], list)
     entry_times = [next(iter(entry.values()))["Time"] for entry in document["Pattern"]]
     assert sorted_times(entry_times)
@@ -268,7 +283,7 @@ def test_ahap_has_the_required_structure(pens, name):
 @pytest.mark.parametrize("name", PENS)
 def test_ahap_curves_follow_the_pattern(pens, name):
     profile = pens[name]
-    document = ahap.build(profile)
+    document = doc("ahap", profile)
     times, intensity = ahap_curve(document, "HapticIntensityControl")
     assert_follows(times, intensity, profile.tactile, profile.meta.tactile.rate)
     assert intensity.max() == pytest.approx(1.0, abs=1e-3)
@@ -281,7 +296,7 @@ def test_ahap_curves_follow_the_pattern(pens, name):
 
 def test_ahap_follows_a_strongly_varying_pattern(swept):
     profile, freqs = swept
-    document = ahap.build(profile)
+    document = doc("ahap", profile)
     times, intensity = ahap_curve(document, "HapticIntensityControl")
     assert_follows(times, intensity, profile.tactile, 8000, minimum=0.98)
     assert intensity.min() < 0.3
@@ -291,7 +306,7 @@ def test_ahap_follows_a_strongly_varying_pattern(swept):
 
 
 def test_ahap_splits_long_patterns_into_30_s_events(pens):
-    document = ahap.build(pens["pencil"], repeats=25, sound=False)
+    document = doc("ahap", pens["pencil"], repeats=25, sound_events=False)
     continuous = [e["Event"] for e in document["Pattern"]
                   if e.get("Event", {}).get("EventType") == "HapticContinuous"]
     assert [(e["Time"], e["EventDuration"]) for e in continuous] == [(0, 30), (30, 7.5)]
@@ -318,7 +333,7 @@ def test_ahap_export_writes_the_sound_it_plays(tmp_path, pens):
 @pytest.mark.parametrize("name", PENS)
 def test_haptic_has_the_v1_fields_and_follows_the_pattern(pens, name):
     profile = pens[name]
-    document = json.loads(render(profile, "haptic").data)
+    document = doc("haptic", profile)
     assert document["version"] == {"major": 1, "minor": 0, "patch": 0}
     envelopes = document["signals"]["continuous"]["envelopes"]
     amplitude, frequency = envelopes["amplitude"], envelopes["frequency"]
@@ -338,8 +353,8 @@ def test_haptic_has_the_v1_fields_and_follows_the_pattern(pens, name):
 
 def test_haptic_amplitude_matches_the_ahap_intensity_squared(pens):
     profile = pens["pencil"]
-    lofelt = haptic.build(profile)["signals"]["continuous"]["envelopes"]["amplitude"]
-    times, intensity = ahap_curve(ahap.build(profile), "HapticIntensityControl")
+    lofelt = doc("haptic", profile)["signals"]["continuous"]["envelopes"]["amplitude"]
+    times, intensity = ahap_curve(doc("ahap", profile), "HapticIntensityControl")
     assert np.allclose([p["time"] for p in lofelt], times, atol=1e-6)
     assert np.allclose(np.sqrt([p["amplitude"] for p in lofelt]), intensity, atol=2e-3)
 
@@ -349,7 +364,7 @@ def test_haptic_amplitude_matches_the_ahap_intensity_squared(pens):
 @pytest.mark.parametrize("name", PENS)
 def test_android_waveform_steps_follow_the_pattern(pens, name):
     profile = pens[name]
-    document = json.loads(render(profile, "android", repeats=2).data)
+    document = doc("android", profile, repeats=2)
     wave = document["waveform"]
     timings, amplitudes = wave["timings_ms"], wave["amplitudes"]
     assert len(timings) == len(amplitudes) == 300 and wave["repeat"] == 0
@@ -362,7 +377,7 @@ def test_android_waveform_steps_follow_the_pattern(pens, name):
 @pytest.mark.parametrize("name", PENS)
 def test_android_envelopes_fit_every_capable_device(pens, name):
     profile = pens[name]
-    document = android.build(profile)
+    document = doc("android", profile)
     expected = component_centroids(profile)
     for key, level, tone in (("waveform_envelope", "amplitude", "frequency_hz"),
                              ("basic_envelope", "intensity", "sharpness")):
@@ -381,7 +396,7 @@ def test_android_envelopes_fit_every_capable_device(pens, name):
 
 def test_android_envelope_follows_a_strongly_varying_pattern(swept):
     profile, freqs = swept
-    points = android.build(profile)["waveform_envelope"]["control_points"]
+    points = doc("android", profile)["waveform_envelope"]["control_points"]
     stamps = np.cumsum([p["duration_ms"] for p in points]) / 1000
     level = np.array([p["amplitude"] for p in points])
     # Segment means of the raised-cosine level: low at the ends, 1 in the middle.
@@ -431,7 +446,7 @@ def synthesise_hjif(document: dict, frames: int) -> np.ndarray:
 @pytest.mark.parametrize("name", PENS)
 def test_hjif_has_the_required_fields(pens, name):
     profile = pens[name]
-    document = json.loads(render(profile, "hjif").data)
+    document = doc("hjif", profile)
     for key in ("version", "profile", "level", "date", "description", "timescale", "avatars",
                 "perceptions", "syncs"):
         assert key in document
@@ -475,7 +490,7 @@ def test_hjif_has_the_required_fields(pens, name):
 @pytest.mark.parametrize("name", PENS)
 def test_hjif_sine_effects_add_up_to_the_pattern(pens, name):
     profile = pens[name]
-    document = hjif.build(profile, repeats=2)
+    document = doc("hjif", profile, repeats=2)
     x = np.tile(profile.tactile.astype(np.float64), 2)
     y = synthesise_hjif(document, len(x))
     inner = slice(20, len(x) - 20)  # the wrap crossfade is cut at the file's two ends
@@ -490,12 +505,9 @@ def test_hjif_reproduces_other_pattern_layouts(pens, boundary, count, unit_ms):
     """Hard boundaries, and one 1500 ms sub-pattern (conditions D–F), split into pieces."""
     base = pens["marker"]
     subpatterns = base.meta.tactile.subpatterns[:count]
-    x = synthesize(subpatterns, 8000, unit_ms, boundary, 5.0)
-    tactile = base.meta.tactile.model_copy(update={
-        "boundary": boundary, "subpatterns": subpatterns, "subpattern_ms": unit_ms})
-    profile = dataclasses.replace(base, meta=base.meta.model_copy(update={"tactile": tactile}),
-                                  tactile=x.astype(np.float32))
-    document = hjif.build(profile)
+    pattern = TactilePattern(subpatterns, 8000, unit_ms, boundary, 5.0)
+    x = pattern.samples
+    document = doc("hjif", pattern)
     effects = document["perceptions"][0]["channels"][0]["bands"][0]["effects"]
     assert len(effects) > len(subpatterns[0])  # a 1500 ms component is split into pieces
     y = synthesise_hjif(document, len(x))
@@ -508,13 +520,13 @@ def test_hjif_reproduces_other_pattern_layouts(pens, boundary, count, unit_ms):
 
 def test_export_profile_refuses_unknown_formats_and_options(tmp_path, pens):
     out = tmp_path / "x.out"
-    with pytest.raises(RealPenError, match=r"--format: unknown format 'mp3' \(known: wav, "):
+    with pytest.raises(ParameterError, match=r"^fmt: unknown format 'mp3' \(known: wav, "):
         export_profile(pens["pencil"], "mp3", out)
-    with pytest.raises(RealPenError, match="--stereo: not used by --format ahap"):
+    with pytest.raises(ParameterError, match="^stereo: not used by format 'ahap'"):
         export_profile(pens["pencil"], "ahap", out, stereo=True)
-    with pytest.raises(RealPenError, match="--repeats: not used by --format c-header"):
+    with pytest.raises(ParameterError, match="^repeats: not used by format 'c-header'"):
         export_profile(pens["pencil"], "c-header", out, repeats=2)
-    with pytest.raises(RealPenError, match="--repeats: must be a whole number"):
+    with pytest.raises(ParameterError, match="^repeats: must be a whole number"):
         export_profile(pens["pencil"], "haptic", out, repeats=0)
     assert list(tmp_path.iterdir()) == []
 
@@ -522,7 +534,7 @@ def test_export_profile_refuses_unknown_formats_and_options(tmp_path, pens):
 def test_every_format_renders_every_pen(pens):
     for name, profile in pens.items():
         for fmt in FORMATS:
-            result = render(profile, fmt)
+            result = render(fmt, profile)
             assert result.data and result.summary and result.limits, (name, fmt)
 
 
@@ -593,3 +605,88 @@ def test_cli_bad_input_fails_cleanly_and_writes_nothing(tmp_path, case):
     result = run_cli(*args)
     assert_clean_failure(result, names)
     assert {p.name for p in tmp_path.iterdir()} == before
+
+
+# --- a pattern from a notebook --------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def notebook_pattern():
+    from realpen.examples import example_recording_path
+    from realpen.tactile.build import tactile_pattern
+
+    return tactile_pattern(example_recording_path(), "lra:f0=175,q=8", condition="E")
+
+
+def test_a_pattern_exports_in_every_format_without_a_profile(tmp_path, notebook_pattern):
+    for fmt, module in FORMATS.items():
+        result = render(fmt, notebook_pattern)
+        assert result.data and result.summary and result.limits, fmt
+        written = export(fmt, tmp_path / f"e{module.SUFFIX}", notebook_pattern)
+        assert written.path.stat().st_size > 0 and written.companions == [], fmt
+    ahap_doc = doc("ahap", notebook_pattern, created="2025-01-01")
+    assert not [e for e in ahap_doc["Pattern"] if e.get("Event", {}).get("EventType") == "AudioCustom"]
+    assert any("no sound" in limit for limit in render("ahap", notebook_pattern).limits)
+    assert notebook_pattern.version in ahap_doc["Metadata"]["Description"]
+    header = render("c-header", notebook_pattern, name="my-pen").data.decode()
+    assert "REALPEN_MY_PEN_RATE_HZ 8000UL" in header
+    hjif_doc = doc("hjif", notebook_pattern)
+    assert hjif_doc["perceptions"][0]["reference_devices"][0]["name"] == "lra:f0=175,q=8"
+
+
+def test_formats_that_need_the_sound_say_so(tmp_path, notebook_pattern):
+    with pytest.raises(ParameterError, match="^sound: a stereo WAV .* needs the sound") as info:
+        render("wav", notebook_pattern, stereo=True)
+    assert info.value.parameter == "sound"
+    with pytest.raises(ParameterError, match="^sound: AHAP sound events .* need the sound"):
+        export("ahap", tmp_path / "x.ahap", notebook_pattern, sound_events=True)
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ParameterError, match="^sound: is not a loop"):
+        render("wav", notebook_pattern, sound=SimpleLoop(np.zeros(100), 48000, is_loop=False),
+               stereo=True)
+
+
+@dataclasses.dataclass
+class SimpleLoop:
+    """What the exports need of a sound loop: samples (full scale) and a rate in Hz."""
+
+    samples: np.ndarray
+    rate: int
+    is_loop: bool = True
+
+
+def test_a_pattern_with_a_sound_loop_and_coupling(tmp_path, notebook_pattern, pens):
+    from realpen.sound.coupling import Coupling
+
+    t = np.arange(14400) / 48000
+    loop = SimpleLoop(0.1 * np.sin(2 * np.pi * 1000 * t), 48000)
+    written = export("ahap", tmp_path / "nb.ahap", notebook_pattern, sound=loop, name="nb")
+    assert written.companions == [tmp_path / "nb-sound.wav"]
+    assert companion_paths("ahap", tmp_path / "nb.ahap") == written.companions
+    assert companion_paths("hjif", tmp_path / "nb.hjif") == []
+    sound, rate = sf.read(tmp_path / "nb-sound.wav")
+    assert rate == 48000 and np.max(np.abs(sound - loop.samples)) <= 1 / 32768 + 1e-9
+    samples, rate = wav.stereo_samples(notebook_pattern, loop)
+    assert samples.shape == (72000, 2)
+    assert np.array_equal(samples[:, 0], np.tile(loop.samples, 5).astype(np.float32))
+    document = android.build(notebook_pattern, Coupling(c_p=0.7), name="nb")
+    assert document["coupling"]["c_p"] == 0.7 and "object NbVibration" in "\n".join(document["kotlin"])
+    assert "coupling" not in android.build(notebook_pattern)
+    # A profile exports exactly as its pattern, loop and coupling do.
+    profile = pens["ballpoint"]
+    inputs = profile_inputs(profile)
+    for fmt in FORMATS:
+        options = {"ahap": {"created": "2025-01-01"}, "hjif": {"date": "2025-01-01"}}.get(fmt, {})
+        by_profile = render(fmt, profile, **options)
+        by_parts = render(fmt, inputs["pattern"], inputs["sound"], inputs["coupling"],
+                          name=inputs["name"], tool=inputs["tool"], version=inputs["version"],
+                          **options)
+        assert by_profile.data == by_parts.data, fmt
+    direct = ahap.build(profile.pattern, profile.sound_loop, created="2025-01-01", name="ballpoint",
+                        tool=profile.meta.tool, version=profile.version)
+    assert direct == doc("ahap", profile, created="2025-01-01")
+
+
+def test_export_repr_is_one_line(pens):
+    text = repr(render("ahap", pens["pencil"]))
+    assert text.startswith("Export(") and "companions ['pencil-sound.wav']" in text
+    assert len(text) < 200 and "\n" not in text

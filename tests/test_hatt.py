@@ -11,7 +11,7 @@ import pytest
 from scipy import signal
 
 from realpen.datasets.hatt import load_hatt, lsf_to_poly, synthesize
-from realpen.errors import RealPenError
+from realpen.errors import ParameterError, RealPenError
 
 HATT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "hatt_models"
 
@@ -250,7 +250,102 @@ def test_bad_files_raise_one_line_errors_naming_the_file(tmp_path, content, prob
 
 def test_bad_synthesis_parameters(synthetic):
     s = load_hatt(synthetic)
-    with pytest.raises(RealPenError, match="duration_s"):
-        synthesize(s, 100.0, 1.0, 0.0)
-    with pytest.raises(RealPenError, match="force_n"):
-        synthesize(s, 100.0, float("nan"), 1.0)
+    for args, kwargs, parameter in (((100.0, 1.0, 0.0), {}, "duration_s"),
+                                    ((100.0, 1.0, 1e-4), {}, "duration_s"),
+                                    ((100.0, float("nan"), 1.0), {}, "force_n"),
+                                    ((float("inf"), 1.0, 1.0), {}, "speed_mm_s"),
+                                    ((np.ones(3), 1.0, 1.0), {}, "speed_mm_s"),
+                                    ((100.0, 1.0, 1.0), {"seed": -1}, "seed"),
+                                    ((100.0, 1.0, 1.0), {"seed": 1.5}, "seed"),
+                                    ((100.0, 1.0, 1.0), {"update_s": 0}, "update_s")):
+        with pytest.raises(ParameterError) as caught:
+            synthesize(s, *args, **kwargs)
+        assert caught.value.parameter == parameter, caught.value
+        assert str(caught.value).startswith(f"{parameter}: ") and "--" not in str(caught.value)
+    with pytest.raises(ParameterError, match="^force_n: "):
+        s.model_at(100.0, float("nan"))
+
+
+# ---- the command line: realpen hatt list | synth ----
+
+def test_cli_hatt_list_prints_the_speed_force_grid(hatt_dir):
+    from conftest import run_cli
+
+    path = hatt_dir / "Models_Book.xml"
+    model_set = load_hatt(path)
+    result = run_cli("hatt", "list", path)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith(f"{path}: 'Book', {len(model_set.models)} models at 1000 Hz")
+    rows = [[cell.strip() for cell in line.split("│")[1:-1]] for line in lines
+            if line.startswith("│") and line.split("│")[1].strip().isdigit()]
+    assert len(rows) == len(model_set.models)
+    printed = sorted((float(speed), float(force)) for _, speed, force, _, _ in rows)
+    expected = sorted((round(s, 1), round(f, 3)) for s, f in model_set.vertices)
+    assert np.allclose(printed, expected)
+
+
+def test_cli_hatt_synth_writes_a_recording_that_realpen_reads(hatt_dir, tmp_path):
+    from conftest import run_cli
+
+    from realpen.io.recording import load_recording
+
+    path = hatt_dir / "Models_Book.xml"
+    out = tmp_path / "book.wav"
+    result = run_cli("hatt", "synth", path, "--speed", "150", "--force", "1.5", "--seconds", "2",
+                     "--seed", "4", "-o", out)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith(f"wrote {out}: 2.00 s at 1000 Hz")
+    written = load_recording(out)
+    expected = synthesize(load_hatt(path), 150.0, 1.5, 2.0, seed=4)
+    assert written.rate == 1000 and written.samples.shape == (2000, 1)
+    np.testing.assert_allclose(written.mono, expected.mono, rtol=1e-6, atol=1e-6)  # float32 WAV
+    # Refused unless --overwrite (--force is the normal force here); resampled with --rate.
+    result = run_cli("hatt", "synth", path, "--speed", "150", "--force", "1.5", "--seconds", "2",
+                     "-o", out)
+    assert result.returncode == 2 and result.stderr == (
+        f"realpen: error: {out}: exists; pass --overwrite to replace it\n")
+    npz = tmp_path / "book.npz"
+    result = run_cli("hatt", "synth", path, "--speed", "1000", "--force", "1.5", "--seconds",
+                     "1", "--rate", "1344", "-o", npz)
+    assert result.returncode == 0, result.stderr
+    assert "note: speed 1000 mm/s is outside the modelled" in result.stdout
+    resampled = load_recording(npz)
+    assert resampled.rate == 1344 and resampled.units == "m/s^2" and len(resampled.mono) == 1344
+    assert run_cli("hatt", "synth", path, "--speed", "150", "--force", "1.5", "--seconds", "2",
+                   "--seed", "4", "-o", out, "--overwrite").returncode == 0
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--seconds", "0"], "--seconds: must be > 0, got 0"),
+    (["--seconds", "nan"], "--seconds: must be a finite number"),
+    (["--speed", "inf"], "--speed: must be finite"),
+    (["--force", "nan"], "--force: must be finite"),
+    (["--seed", "-1"], "--seed: must be a whole number >= 0"),
+    (["--rate", "0"], "--rate: must be > 0"),
+])
+def test_cli_hatt_synth_bad_options_name_the_flag(synthetic, tmp_path, options, message):
+    from conftest import assert_clean_failure, run_cli
+
+    base = {"--speed": "100", "--force": "1", "--seconds": "1"}
+    base.update(dict(zip(options[::2], options[1::2])))
+    args = [item for pair in base.items() for item in pair]
+    result = run_cli("hatt", "synth", synthetic, *args, "-o", tmp_path / "out.wav")
+    assert_clean_failure(result, f"realpen: error: {message}")
+    assert not (tmp_path / "out.wav").exists()
+
+
+def test_cli_hatt_bad_files_and_outputs(tmp_path, synthetic):
+    from conftest import assert_clean_failure, run_cli
+
+    bad = tmp_path / "Models_Bad.xml"
+    bad.write_text("<modelSet>")
+    assert_clean_failure(run_cli("hatt", "list", bad), "Models_Bad.xml: not a valid XML file")
+    assert_clean_failure(run_cli("hatt", "list", tmp_path / "none.xml"), "none.xml")
+    args = ["hatt", "synth", synthetic, "--speed", "100", "--force", "1", "--seconds", "1"]
+    assert_clean_failure(run_cli(*args, "-o", tmp_path / "out.mp3"),
+                         "out.mp3: write a .wav or .npz file")
+    assert_clean_failure(run_cli(*args, "-o", tmp_path), "is a folder")
+    assert_clean_failure(run_cli("hatt", "synth", synthetic, "--speed", "100", "--seconds", "1",
+                                 "-o", tmp_path / "x.wav"), "--force")  # the force is required
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["Models_Bad.xml", "Models_Synthetic.xml"]

@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from live_support import low_rate_profile, serve
+
+from realpen.profile import resolve_profile
 from realpen.sound.coupling import Coupling, one_pole
-from realpen.profile.bundle import resolve_profile
 from realpen.sound.stroke import Trajectory
 
 CHROMIUM = Path("/usr/bin/chromium")

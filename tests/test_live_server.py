@@ -8,6 +8,8 @@ import json
 import signal
 import socket
 import sqlite3
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -22,13 +24,14 @@ with warnings.catch_warnings():  # starlette's note about a future httpx success
 
 from conftest import assert_clean_failure, run_cli  # noqa: E402
 from live_support import low_rate_profile, serve, stroke_messages  # noqa: E402
+
 from realpen.errors import RealPenError  # noqa: E402
 from realpen.exports.base import resample_loop  # noqa: E402
 from realpen.live.app import LiveSettings, create_app  # noqa: E402
 from realpen.live.catalog import MIN_WAV_RATE, playable_rate, playable_wav  # noqa: E402
 from realpen.live.messages import MAX_MESSAGE_BYTES, MessageError, parse_message  # noqa: E402
 from realpen.live.store import CSV_COLUMNS, StrokeStore, export_csv  # noqa: E402
-from realpen.profile.bundle import load_profile, resolve_profile, save_profile  # noqa: E402
+from realpen.profile import load_profile, resolve_profile, save_profile  # noqa: E402
 from realpen.sound.stroke import load_trajectory  # noqa: E402
 
 LOCAL = "http://127.0.0.1"
@@ -291,6 +294,42 @@ def test_parse_message_limits():
     assert parse_message('{"type":"hello","seq":0,"client":"a"}').type == "hello"
 
 
+def test_the_websocket_schema_loads_without_scipy_or_soundfile():
+    done = subprocess.run(
+        [sys.executable, "-c", "import realpen.live.messages, sys; "
+                               "print('scipy' in sys.modules, 'soundfile' in sys.modules)"],
+        capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["False", "False"]
+
+
+def test_one_stroke_sample_definition_for_messages_store_and_rendering(tmp_path):
+    from realpen.io.strokes import SAMPLE_FIELDS, StrokeSample
+    from realpen.live import messages, store
+    from realpen.sound.stroke import Trajectory
+
+    assert messages.Sample is StrokeSample
+    assert store.SAMPLE_FIELDS == SAMPLE_FIELDS == tuple(StrokeSample.model_fields)
+    assert store.CSV_COLUMNS[-len(SAMPLE_FIELDS):] == SAMPLE_FIELDS
+    path = tmp_path / "s.sqlite3"
+    strokes = store.StrokeStore(path)
+    sid = strokes.begin_stroke(session="s", page_stroke=1, pen="pencil",
+                               profile_version="0" * 12, modality="none", ink="hidden",
+                               pointer_type="pen", px_per_mm=3.78, calibrated=False, page_t0=5.0)
+    samples = [StrokeSample(t=5.0 + k / 100, x=float(k), y=2.0, pressure=0.5, tilt_x=10.0,
+                            speed=100.0 * (k > 0)) for k in range(4)]
+    strokes.add_samples(sid, samples)
+    strokes.close()
+    columns = [row[1] for row in rows(path, "PRAGMA table_info(samples)")]
+    assert tuple(columns[2:]) == SAMPLE_FIELDS
+    store.export_csv(path, tmp_path / "s.csv", stroke=sid)
+    trajectory = load_trajectory(tmp_path / "s.csv")
+    assert trajectory.tilt_x.tolist() == [10.0] * 4
+    again = Trajectory.from_samples(samples)
+    np.testing.assert_allclose(trajectory.t + 5.0, again.t)
+    np.testing.assert_allclose(trajectory.speed(), [0, 100, 100, 100])
+
+
 def test_two_pages_at_once(client, store_path):
     first, second = stroke_messages("pencil", n=6), stroke_messages("ballpoint", n=6)
     with client.websocket_connect(WS) as a, client.websocket_connect(WS) as b:
@@ -391,10 +430,12 @@ def test_strokes_export_cli(client, store_path, tmp_path):
                    stroke_id).returncode == 0
     trajectory = load_trajectory(single)
     assert len(trajectory.t) == 5 and trajectory.pressure[0] == 0.6
+    assert_clean_failure(run_cli("strokes", "export", "--store", store_path, "-o", out),
+                         "exists; pass --force")
     assert_clean_failure(run_cli("strokes", "export", "--store", tmp_path / "none.sqlite3",
-                                 "-o", out), "no such stroke store")
+                                 "-o", out, "--force"), "no such stroke store")
     assert_clean_failure(run_cli("strokes", "export", "--store", store_path, "-o", out,
-                                 "--stroke", "999"), "no stroke with id 999")
+                                 "--stroke", "999", "--force"), "no stroke with id 999")
 
 
 def test_strokes_export_to_a_place_it_cannot_write(client, store_path, tmp_path):
@@ -509,7 +550,7 @@ def test_serve_refuses_bad_options(tmp_path):
         taken.listen(1)
         port = taken.getsockname()[1]
         assert_clean_failure(run_cli("serve", "--port", port, "--store", tmp_path / "s.sqlite3"),
-                             f"--port {port}")
+                             f"--port: cannot listen on 127.0.0.1 port {port}")
     bogus = tmp_path / "bogus.sqlite3"
     bogus.write_text("not sqlite")
     assert_clean_failure(run_cli("serve", "--port", "0", "--store", bogus),
@@ -526,7 +567,8 @@ def test_serve_store_errors_are_one_line_and_leave_nothing(tmp_path):
         taken.bind(("127.0.0.1", 0))
         taken.listen(1)
         port = taken.getsockname()[1]
-        assert_clean_failure(run_cli("serve", "--port", port, "--store", new), f"--port {port}")
+        assert_clean_failure(run_cli("serve", "--port", port, "--store", new),
+                             f"--port: cannot listen on 127.0.0.1 port {port}")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]  # no new.sqlite3, -wal, -shm
 
 

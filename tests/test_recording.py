@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import soundfile as sf
-
-from realpen.errors import RealPenError
-from realpen.io.recording import Recording, load_recording
-from realpen.dsp.filters import combine_axes, dft321, highpass, resample
 from signals import sines
+
+from realpen.dsp.filters import combine_axes, dft321, highpass, prepare, resample
+from realpen.errors import ParameterError, RealPenError
+from realpen.io.recording import Recording, load_recording
 
 RATE = 1344
 
@@ -44,9 +44,28 @@ def test_csv_with_time_column_and_sniffed_delimiter(tmp_path):
 def test_csv_without_time_column_needs_rate(tmp_path):
     path = tmp_path / "rec.csv"
     path.write_text("x,y,z\n" + "\n".join("1,2,3" for _ in range(10)))
-    with pytest.raises(RealPenError, match="rec.csv.*--rate"):
+    with pytest.raises(ParameterError, match=r"^rate: needed in Hz: .*rec.csv") as caught:
         load_recording(path)
+    assert caught.value.parameter == "rate" and "--" not in str(caught.value)
     assert load_recording(path, rate=1000).rate == 1000
+
+
+def test_npz_without_rate_needs_rate(tmp_path):
+    path = tmp_path / "rec.npz"
+    np.savez(path, samples=np.ones((100, 2)))
+    with pytest.raises(ParameterError, match=r"^rate: needed in Hz: .*rec.npz"):
+        load_recording(path)
+    assert load_recording(path, rate=500).rate == 500
+
+
+@pytest.mark.parametrize("rate", [0, -1.0, float("nan"), float("inf")])
+def test_bad_rate_names_the_parameter_not_a_flag(tmp_path, rate):
+    path = tmp_path / "rec.csv"
+    path.write_text("x\n" + "\n".join("1" for _ in range(10)))
+    with pytest.raises(ParameterError) as caught:
+        load_recording(path, rate=rate)
+    assert caught.value.parameter == "rate" and str(caught.value).startswith("rate: ")
+    assert isinstance(caught.value, ValueError)  # code that catches ValueError keeps working
 
 
 def test_npz_keeps_axes_units_and_rate(tmp_path):
@@ -139,6 +158,23 @@ def test_highpass_rate_too_low_for_band():
     rec = Recording(np.zeros(100), 50.0, ("x",), source="slow.csv")
     with pytest.raises(RealPenError, match="slow.csv.*too low"):
         highpass(rec, 30)
+
+
+@pytest.mark.parametrize("call, parameter", [
+    (lambda rec: highpass(rec, -5), "cutoff_hz"),
+    (lambda rec: resample(rec, 0), "rate"),
+    (lambda rec: resample(rec, 0.001), "rate"),
+    (lambda rec: prepare(rec, analysis_rate=-1), "analysis_rate"),
+    (lambda rec: prepare(rec, highpass_hz=float("nan")), "highpass_hz"),
+    (lambda rec: prepare(rec, axis="w"), "axis"),
+])
+def test_filter_arguments_are_named_as_in_python(call, parameter):
+    x = sines([80], [1], RATE, 1.0)
+    rec = Recording(np.column_stack([x, x]), RATE, ("x", "y"))
+    with pytest.raises(ParameterError) as caught:
+        call(rec)
+    assert caught.value.parameter == parameter
+    assert str(caught.value).startswith(f"{parameter}: ") and "--" not in str(caught.value)
 
 
 def test_resample_polyphase_keeps_a_tone():

@@ -11,15 +11,27 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
+from conftest import LMT_DIR
 from scipy import signal
 
 import realpen
-from conftest import LMT_DIR
+from realpen.errors import ParameterError, RealPenError
+from realpen.io.files import read_smpl_loop
+from realpen.io.recording import Recording
+from realpen.io.strokes import SAMPLE_FIELDS, StrokeSample
 from realpen.sound.coupling import Coupling
-from realpen.errors import RealPenError
 from realpen.sound.granular import granular, granular_loop, steady_part
-from realpen.sound.loop import (crossfade_gains, find_loop_unit, level_db, load_sound, make_loop,
-                           scan_windows, seam_report)
+from realpen.sound.loop import (
+    SoundLoop,
+    crossfade_gains,
+    find_loop,
+    find_loop_unit,
+    level_db,
+    load_sound,
+    make_loop,
+    scan_windows,
+    seam_report,
+)
 from realpen.sound.stroke import Trajectory, control_signals, load_trajectory, render_stroke
 
 RATE = 48000
@@ -176,9 +188,10 @@ def test_silence_and_short_recordings_are_refused():
     with pytest.raises(RealPenError, match="short.wav: recording lasts 200 ms, shorter than the "
                                            "300 ms unit"):
         find_loop_unit(noise(0.2, 0), RATE, source="short.wav")
-    with pytest.raises(RealPenError, match="--crossfade-ms"):
+    with pytest.raises(ParameterError, match="^crossfade_ms: ") as caught:
         find_loop_unit(noise(1.0, 0), RATE, crossfade_ms=300)
-    with pytest.raises(RealPenError, match="--unit-ms"):
+    assert caught.value.parameter == "crossfade_ms"
+    with pytest.raises(ParameterError, match="^unit_ms: "):
         find_loop_unit(noise(1.0, 0), RATE, unit_ms=float("nan"))
 
 
@@ -457,12 +470,14 @@ def test_load_trajectory_validates(tmp_path):
 @pytest.mark.parametrize("level", [float("nan"), float("inf"), 300.0, 0.5])
 def test_level_must_be_finite_and_at_most_0_dbfs_everywhere(level):
     x = lowpassed(3.0, 20, cutoff=4000)
-    with pytest.raises(RealPenError, match="--level-dbfs must be a finite level of at most 0"):
+    with pytest.raises(ParameterError, match="^level_dbfs: must be a finite level of at most 0"):
         find_loop_unit(x, RATE).normalised(level)
-    with pytest.raises(RealPenError, match="--level-dbfs"):
-        granular_loop(x, RATE, length_ms=1000, rms_dbfs=level)
+    with pytest.raises(ParameterError, match="^level_dbfs: "):
+        granular_loop(x, RATE, length_ms=1000, level_dbfs=level)
+    with pytest.raises(ParameterError, match="^level_dbfs: "):
+        find_loop(x, rate=RATE, level_dbfs=level)
     for mode in ("loop", "granular"):
-        with pytest.raises(RealPenError, match="--level-dbfs"):
+        with pytest.raises(ParameterError, match="^level_dbfs: "):
             render_stroke(x, RATE, stroke(), Coupling(), mode, level_dbfs=level)
 
 
@@ -477,7 +492,7 @@ def test_a_rate_too_low_for_the_bands_is_refused_naming_the_minimum(tmp_path):
     path = tmp_path / "take.wav"
     sf.write(path, noise(1.0, 21), RATE)
     for rate in (100.0, 222.0, 7999.0):
-        with pytest.raises(RealPenError, match=r"--rate: .* too low .* minimum is 8000 Hz"):
+        with pytest.raises(ParameterError, match=r"^rate: .* too low .* minimum is 8000 Hz"):
             load_sound(path, rate=rate)
     low = tmp_path / "low.wav"
     sf.write(low, np.random.default_rng(0).standard_normal(4000) * 0.1, 4000)
@@ -509,31 +524,33 @@ def test_constant_input_is_refused_as_silence(tmp_path):
     assert find_loop_unit(0.3 + noise(1.0, 23), RATE).seam.level_jump_db < 1.0
 
 
-@pytest.mark.parametrize("name,kwargs", [
-    ("--unit-ms", {"unit_ms": float("nan")}), ("--unit-ms", {"unit_ms": float("inf")}),
-    ("--unit-ms", {"unit_ms": 0.0}), ("--unit-ms", {"unit_ms": -300.0}),
-    ("--crossfade-ms", {"crossfade_ms": float("nan")}), ("--crossfade-ms", {"crossfade_ms": 0.0}),
-    ("--crossfade-ms", {"crossfade_ms": -1.0}),
-    ("--grain-ms", {"grain_ms": float("nan")}), ("--grain-ms", {"grain_ms": 0.0})])
-def test_lengths_must_be_finite_and_positive_everywhere(name, kwargs):
+@pytest.mark.parametrize("kwargs", [
+    {"unit_ms": float("nan")}, {"unit_ms": float("inf")}, {"unit_ms": 0.0}, {"unit_ms": -300.0},
+    {"crossfade_ms": float("nan")}, {"crossfade_ms": 0.0}, {"crossfade_ms": -1.0},
+    {"grain_ms": float("nan")}, {"grain_ms": 0.0}])
+def test_lengths_must_be_finite_and_positive_everywhere(kwargs):
+    (name,) = kwargs
     x = lowpassed(3.0, 24)
     for mode in ("loop", "granular"):
-        with pytest.raises(RealPenError, match=name):
+        with pytest.raises(ParameterError, match=f"^{name}: ") as caught:
             render_stroke(x, RATE, stroke(), Coupling(), mode, **kwargs)
-        with pytest.raises(RealPenError, match=name):
+        assert caught.value.parameter == name and "--" not in str(caught.value)
+        with pytest.raises(ParameterError, match=f"^{name}: "):
             render_stroke(x, RATE, stroke(), Coupling(), mode, find_unit=False, **kwargs)
     if "grain_ms" in kwargs:
-        with pytest.raises(RealPenError, match=name):
+        with pytest.raises(ParameterError, match=f"^{name}: "):
             granular_loop(x, RATE, **kwargs)
     else:
-        with pytest.raises(RealPenError, match=name):
+        with pytest.raises(ParameterError, match=f"^{name}: "):
             find_loop_unit(x, RATE, **kwargs)
+        with pytest.raises(ParameterError, match=f"^{name}: "):
+            find_loop(x, rate=RATE, **kwargs)
 
 
 def test_render_searches_a_short_recording_only_when_not_told_it_is_a_loop():
     short = lowpassed(0.5, 25)  # longer than the unit, shorter than two units
-    with pytest.raises(RealPenError, match=r"take.wav: lasts 200 ms, shorter than the 300 ms "
-                                           r"unit plus the 10 ms crossfade .*--as-loop"):
+    with pytest.raises(ParameterError, match=r"^find_unit: take.wav lasts 200 ms, shorter than "
+                                             r"the 300 ms unit plus the 10 ms crossfade"):
         render_stroke(short[:int(0.2 * RATE)], RATE, stroke(), source="take.wav")
     searched = render_stroke(short, RATE, stroke())  # no longer played as a loop by length
     assert searched.unit is not None and len(searched.unit.samples) == UNIT
@@ -543,8 +560,8 @@ def test_render_searches_a_short_recording_only_when_not_told_it_is_a_loop():
 
 @pytest.mark.parametrize("length_ms", [60001.0, 1e9, float("inf")])
 def test_granular_texture_length_is_bounded_to_60_s(length_ms):
-    with pytest.raises(RealPenError, match=r"--length-ms must be at most 60000 ms \(60 s\)"
-                       if np.isfinite(length_ms) else "--length-ms"):
+    with pytest.raises(ParameterError, match=r"^length_ms: must be at most 60000 ms \(60 s\)"
+                       if np.isfinite(length_ms) else "^length_ms: "):
         granular_loop(lowpassed(3.0, 26), RATE, length_ms=length_ms)
 
 
@@ -672,3 +689,179 @@ def test_public_functions_give_the_units_of_their_arguments():
             if unit is not None and unit not in doc:
                 missing.append(f"{where}({parameter}): no '{unit}' in the docstring")
     assert not missing, "\n".join(missing)
+
+
+# --- the one SoundLoop type -------------------------------------------------------------------
+
+def test_find_loop_takes_an_array_a_recording_or_a_path_and_gives_a_sound_loop(tmp_path):
+    x = lowpassed(2.0, 30)
+    from_array = find_loop(x, rate=RATE)
+    assert isinstance(from_array, SoundLoop) and from_array.mode == "loop"
+    np.testing.assert_array_equal(from_array.samples, find_loop_unit(x, RATE).samples)
+    stereo = Recording(np.column_stack([x, x]), RATE, ("left", "right"), source="take.wav")
+    from_recording = find_loop(stereo)
+    np.testing.assert_allclose(from_recording.samples, from_array.samples, atol=1e-12)
+    assert from_recording.source == "take.wav" and "mixdown:2ch" in from_recording.history
+    path = tmp_path / "take.wav"
+    sf.write(path, x, RATE, subtype="FLOAT")
+    from_path = find_loop(path, level_dbfs=-20.0)
+    assert from_path.start_s == from_array.start_s
+    assert from_path.rms_dbfs == pytest.approx(-20.0) and from_path.source == str(path)
+    with pytest.raises(ParameterError, match="^rate: needed in Hz"):
+        find_loop(x)
+    with pytest.raises(TypeError):
+        find_loop(x, RATE)  # options are keyword-only
+
+
+def test_sound_loop_reports_its_making_in_one_line_and_in_json():
+    x = lowpassed(3.0, 31)
+    unit = find_loop(x, rate=RATE, source="pencil.wav").normalised()
+    texture = granular_loop(x, RATE, length_ms=1000, seed=4)
+    ready = SoundLoop.from_samples(unit.samples, RATE, source="loop.wav")
+    for loop, mode in ((unit, "loop"), (texture, "granular"), (ready, "loop")):
+        text = repr(loop)
+        assert text.startswith("SoundLoop(") and "\n" not in text and len(text) < 200, text
+        document = loop.to_json()
+        json.dumps(document, allow_nan=False)
+        assert document["mode"] == loop.mode == mode
+        for key in ("rate", "frames", "length_ms", "start_s", "end_s", "seam", "gain",
+                    "rms_dbfs"):
+            assert key in document, (mode, key)
+    assert unit.to_json()["scores"]["cost"] == pytest.approx(unit.scores["cost"], abs=1e-4)
+    assert texture.to_json()["grain_ms"] == 50.0 and texture.part is not None
+    assert ready.to_json()["scores"] is None and ready.seam is not None
+    assert len(repr(unit.seam)) < 200 and len(repr(scan_windows(x, RATE))) < 200
+    with pytest.raises(ParameterError, match="^mode: "):
+        SoundLoop(samples=x, rate=RATE, mode="frozen")
+
+
+def smpl_chunks(data: bytes) -> list[tuple[int, ...]]:
+    """Every ``smpl`` chunk of a WAV, read here with struct, not with RealPen's reader:
+    (manufacturer, product, period ns, unity note, pitch fraction, SMPTE format, SMPTE offset,
+    loops, sampler data, then per loop: cue id, type, start, end, fraction, play count)."""
+    import struct
+    assert data[:4] == b"RIFF" and data[8:12] == b"WAVE"
+    assert struct.unpack_from("<I", data, 4)[0] == len(data) - 8  # the RIFF size was updated
+    found, position = [], 12
+    while position + 8 <= len(data):
+        name, length = struct.unpack_from("<4sI", data, position)
+        if name == b"smpl":
+            head = struct.unpack_from("<9I", data, position + 8)
+            loops = [struct.unpack_from("<6I", data, position + 8 + 36 + 24 * k)
+                     for k in range(head[7])]
+            found.append(head + sum(loops, ()))
+            assert length == 36 + 24 * head[7] + head[8]
+        position += 8 + length + (length & 1)
+    assert position == len(data)
+    return found
+
+
+def test_a_saved_loop_carries_a_standard_smpl_loop_and_loads_back_as_a_ready_loop(tmp_path):
+    unit = find_loop(lowpassed(2.0, 32), rate=RATE).normalised()
+    path = tmp_path / "loop.wav"
+    unit.save(path)
+    data = path.read_bytes()
+    assert data == unit.wav_bytes() == unit.wav_bytes()  # deterministic
+    assert smpl_chunks(data) == [(0, 0, 20833, 60, 0, 0, 0, 1, 0, 0, 0, 0, UNIT - 1, 0, 0)]
+    assert read_smpl_loop(path) == read_smpl_loop(data) == (0, UNIT - 1)
+    info = sf.info(path).extra_info  # libsndfile reads the same chunk
+    assert "smpl" in info and "Loop Count   : 1" in info and f"End : {UNIT - 1}" in info
+    samples, rate = sf.read(path, dtype="float32")
+    np.testing.assert_array_equal(samples, unit.samples.astype(np.float32))
+    loaded = load_sound(path)
+    assert isinstance(loaded, SoundLoop) and loaded.rate == RATE
+    np.testing.assert_array_equal(loaded.samples, unit.samples.astype(np.float32))
+    assert loaded.source == str(path) and any("smpl-loop" in s for s in loaded.history)
+    assert find_loop(path) is not None and find_loop(path).frames == UNIT  # already a loop
+    # at another rate the loop is resampled circularly: its length scales, the wrap stays clean
+    slower = load_sound(path, rate=44100)
+    assert slower.frames == round(UNIT * 44100 / RATE) and slower.seam.level_jump_db < 1.0
+    # a recording without the chunk is still a recording
+    sf.write(tmp_path / "plain.wav", unit.samples, RATE, subtype="FLOAT")
+    assert isinstance(load_sound(tmp_path / "plain.wav"), Recording)
+    assert read_smpl_loop(tmp_path / "plain.wav") is None
+
+
+def test_a_smpl_loop_inside_a_longer_file_is_cut_out(tmp_path):
+    from realpen.io.files import add_smpl_loop, wav_bytes
+    x = lowpassed(1.0, 33)
+    path = tmp_path / "sampler.wav"
+    path.write_bytes(add_smpl_loop(wav_bytes(x, RATE), start=4800, end=4800 + UNIT - 1))
+    loaded = load_sound(path)
+    np.testing.assert_array_equal(loaded.samples, x[4800:4800 + UNIT].astype(np.float32))
+    assert loaded.start_s == pytest.approx(0.1)
+    with pytest.raises(ParameterError, match="^end: "):
+        add_smpl_loop(wav_bytes(x, RATE), end=len(x))
+
+
+def test_render_plays_a_sound_loop_as_it_is():
+    unit = find_loop(lowpassed(3.0, 14), rate=RATE)
+    as_loop = render_stroke(unit, None, stroke(), Coupling(rate_exponent=0))
+    as_samples = render_stroke(unit.samples, RATE, stroke(), Coupling(rate_exponent=0),
+                               find_unit=False)
+    np.testing.assert_array_equal(as_loop.samples, as_samples.samples)
+    assert as_loop.unit is None and as_loop.loop is unit and len(repr(as_loop)) < 200
+    with pytest.raises(ParameterError, match="^rate: "):
+        render_stroke(unit, 44100, stroke())
+
+
+# --- one stroke-sample definition ------------------------------------------------------------
+
+def test_trajectory_converts_to_and_from_stroke_samples():
+    trajectory = irregular_strokes(seed=5)
+    samples = trajectory.to_samples()
+    assert all(isinstance(sample, StrokeSample) for sample in samples)
+    assert [sample.speed for sample in samples] == pytest.approx(trajectory.speed().tolist())
+    again = Trajectory.from_samples(samples)
+    for name in ("t", "x", "y", "pressure"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(trajectory, name))
+    assert SAMPLE_FIELDS[:4] == ("t", "x", "y", "pressure")
+    text = repr(trajectory)
+    assert text.startswith("Trajectory(400 events") and len(text) < 200
+
+
+def test_trajectory_takes_the_stroke_samples_ranges_and_tilt(tmp_path):
+    path = tmp_path / "stroke.csv"
+    path.write_text("t,x,y,pressure,tilt_x,tilt_y,note\n0,0,0,0.5,10,-5,a\n0.01,1,0,0.5,12,-5,b\n")
+    trajectory = load_trajectory(path)
+    np.testing.assert_array_equal(trajectory.tilt_x, [10, 12])
+    assert trajectory.to_samples()[1].tilt_y == -5.0
+    path.write_text("t,x,y,pressure,tilt_x\n0,0,0,0.5,10\n0.01,1,0,0.5,95\n")
+    with pytest.raises(RealPenError, match="line 3: tilt_x = 95 degrees must be between -90"):
+        load_trajectory(path)
+    with pytest.raises(RealPenError, match="row 2: x = 2e\\+06 mm"):
+        Trajectory.checked([0, 1], [0, 2e6], [0, 0], [0.5, 0.5])
+
+
+# --- the one CSV reader -----------------------------------------------------------------------
+
+def test_csv_reader_sniffs_semicolons_and_decimal_commas(tmp_path):
+    from realpen.io.csvtable import read_csv
+    path = tmp_path / "table.csv"
+    path.write_text("\ufeffpressure;speed;amplitude\r\n0,5;10;0,2\r\n\r\n0,75;20,5;0,3\r\n")
+    table = read_csv(path, ("speed", "pressure"))
+    assert table.delimiter == ";" and table.decimal_comma
+    assert table.column("Pressure").tolist() == [0.5, 0.75]
+    assert table.columns["speed"].tolist() == [10.0, 20.5]
+    assert table.lines.tolist() == [2, 4] and len(repr(table)) < 200
+    path.write_text("50\t0.1\n100\t1\n")
+    headerless = read_csv(path, header=None)
+    assert headerless.header is None and headerless.values.tolist() == [[50, 0.1], [100, 1]]
+
+
+@pytest.mark.parametrize("content,problem", [
+    ("a,b\n1,2\n\n3,x\n", "line 4: 'x' in column 'b' is not a number"),
+    ("a,b\n1,2\n3,inf\n", "line 3: column 'b' is inf (NaN or infinite)"),
+    ("a;b\n1;2\n3\n", "line 3: 1 values for the 2 columns of the header"),
+    ("1,2\n3,4\n", "line 1: CSV needs a header row naming its columns"),
+    ("a,b\n", "CSV needs at least 1 data row(s), has 0"),
+    ("\n \n", "file holds only blank lines"),
+])
+def test_csv_reader_names_the_file_and_line(tmp_path, content, problem):
+    from realpen.io.csvtable import read_csv
+    path = tmp_path / "table.csv"
+    path.write_text(content)
+    with pytest.raises(RealPenError) as caught:
+        read_csv(path)
+    assert str(caught.value) == f"{path}: {problem}" or (
+        str(caught.value).startswith(f"{path}: ") and problem in str(caught.value))

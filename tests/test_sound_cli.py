@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
+from conftest import LMT_DIR, assert_clean_failure, run_cli
 from scipy import signal
 
-from conftest import LMT_DIR, assert_clean_failure, run_cli
 from realpen.sound.coupling import Coupling
 from realpen.sound.loop import level_db, load_sound, seam_report
 
@@ -69,6 +69,57 @@ def test_sound_loop_writes_a_300_ms_unit_and_its_report(tmp_path, recording):
                                rtol=1e-5, atol=1e-6)
 
 
+def smpl_loop_of(data: bytes) -> tuple[int, int, int, int]:
+    """(sample period ns, MIDI unity note, loop start, loop end) of a WAV's one smpl loop,
+    read here with struct (not with RealPen's own reader)."""
+    import struct
+    position = 12
+    while position + 8 <= len(data):
+        name, length = struct.unpack_from("<4sI", data, position)
+        if name == b"smpl":
+            head = struct.unpack_from("<9I", data, position + 8)
+            cue, kind, start, end, fraction, plays = struct.unpack_from("<6I", data,
+                                                                         position + 8 + 36)
+            assert head[7] == 1 and (cue, kind, fraction, plays) == (0, 0, 0, 0)
+            return head[2], head[3], start, end
+        position += 8 + length + (length & 1)
+    raise AssertionError("no smpl chunk")
+
+
+@pytest.mark.parametrize("mode", ["loop", "granular"])
+def test_a_loop_written_by_sound_loop_declares_its_loop_and_round_trips(tmp_path, recording,
+                                                                       mode):
+    from realpen.sound.loop import SoundLoop
+    done = realpen("sound", "loop", recording, "-o", "loop.wav", "--mode", mode,
+                   "--length-ms", "1000", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    frames = sf.info(tmp_path / "loop.wav").frames
+    assert smpl_loop_of((tmp_path / "loop.wav").read_bytes()) == (20833, 60, 0, frames - 1)
+    assert "Loop Count   : 1" in sf.info(tmp_path / "loop.wav").extra_info
+    loaded = load_sound(tmp_path / "loop.wav")
+    assert isinstance(loaded, SoundLoop) and loaded.frames == frames
+    # given to sound loop again, a ready loop is kept as it is
+    done = realpen("sound", "loop", "loop.wav", "-o", "again.wav", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "the file's own smpl loop" in done.stdout
+    again, _ = sf.read(tmp_path / "again.wav")
+    assert len(again) == frames and level_db(again) == pytest.approx(-20.0, abs=0.01)
+
+
+def test_profile_build_accepts_a_loop_written_by_sound_loop(tmp_path, recording):
+    from realpen.examples import example_recording_path
+    from realpen.profile import load_profile
+    assert realpen("sound", "loop", recording, "-o", "loop.wav", cwd=tmp_path).returncode == 0
+    loop, _ = sf.read(tmp_path / "loop.wav")
+    done = realpen("profile", "build", "--name", "mine", "--vibration", example_recording_path(),
+                   "--sound", "loop.wav", "-o", "mine", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    profile = load_profile(tmp_path / "mine")
+    assert profile.meta.sound.frames == len(loop) == 14400
+    np.testing.assert_allclose(profile.sound, loop, atol=1e-6)  # the loop itself, not re-cut
+    assert profile.meta.sound.unit_ms == pytest.approx(300.0)
+
+
 def test_sound_loop_options_and_granular_mode(tmp_path, recording):
     done = realpen("sound", "loop", recording, "--unit-ms", "250", "--crossfade-ms", "5",
                    "-o", "short.wav", cwd=tmp_path)
@@ -105,16 +156,15 @@ def test_sound_render_with_a_loop_file_a_coupling_and_granular_mode(tmp_path, re
                                                                     trajectory):
     assert realpen("sound", "loop", recording, "-o", "loop.wav", cwd=tmp_path).returncode == 0
     Coupling(c_p=0.0, c_op=0.0, c_x=0.01, c_ov=0.0).save(tmp_path / "speed_only.json")
-    # a ready loop is played as it is only when --as-loop says so; otherwise it is searched
-    # for a unit, which a 300 ms file cannot hold
+    # the loop WAV declares its loop (smpl chunk), so it is played as it is without --as-loop
     done = realpen("sound", "render", "--sound", "loop.wav", "--trajectory", trajectory,
                    "--coupling", "speed_only.json", "-o", "a.wav", cwd=tmp_path)
-    assert_clean_failure(done, "loop.wav")
-    assert "--as-loop" in done.stderr and not (tmp_path / "a.wav").exists()
-    done = realpen("sound", "render", "--sound", "loop.wav", "--as-loop", "--trajectory",
-                   trajectory, "--coupling", "speed_only.json", "-o", "a.wav", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert "the file as a loop" in done.stdout
+    done = realpen("sound", "render", "--sound", "loop.wav", "--as-loop", "--trajectory",
+                   trajectory, "--coupling", "speed_only.json", "-o", "b.wav", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "a.wav").read_bytes() == (tmp_path / "b.wav").read_bytes()
     out, _ = sf.read(tmp_path / "a.wav")
     # speed only: 120 mm/s plays at gain 1.2, 50 mm/s at 0.5
     fast, ordinary = out[int(0.6 * RATE):int(RATE)], out[int(1.4 * RATE):int(1.8 * RATE)]
@@ -391,18 +441,16 @@ def test_a_report_holding_nan_is_refused_before_the_wav_is_written(tmp_path, rec
                                                                     monkeypatch, mode):
     from realpen.cli import sound_cmds
     from realpen.errors import RealPenError
-    from realpen.sound.granular import GranularTexture
-    from realpen.sound.loop import LoopUnit
+    from realpen.sound.loop import SoundLoop
 
-    for kind in (LoopUnit, GranularTexture):
-        real = kind.to_json
-        monkeypatch.setattr(kind, "to_json",
-                            lambda self, real=real: {**real(self), "gain": float("nan")})
+    real = SoundLoop.to_json
+    monkeypatch.setattr(SoundLoop, "to_json",
+                        lambda self, real=real: {**real(self), "gain": float("nan")})
     before = {p.name for p in tmp_path.iterdir()}
     with pytest.raises(RealPenError, match="r.json: .*NaN or infinite") as caught:
         sound_cmds.loop(recording, tmp_path / "loop.wav", unit_ms=300.0, crossfade_ms=10.0,
                         mode=mode, length_ms=1000.0, grain_ms=50.0, seed=0, rate=48000.0,
-                        level_dbfs=-20.0, json_out=tmp_path / "r.json")
+                        level_dbfs=-20.0, json_out=tmp_path / "r.json", force=False)
     assert "\n" not in str(caught.value)
     assert {p.name for p in tmp_path.iterdir()} == before
 

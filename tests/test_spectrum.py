@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from realpen.errors import RealPenError
-from realpen.dsp.spectrum import analyze, principal_frequencies, select_units
 from signals import sines
+
+from realpen.dsp.spectrum import analyze, principal_frequencies, select_units
+from realpen.errors import ParameterError, RealPenError
 
 RATE = 1344
 
@@ -65,8 +65,24 @@ def test_too_short_and_silent():
         analyze(short, RATE, source="short.wav")
     with pytest.raises(RealPenError, match="silent.wav: signal is silent or constant"):
         analyze(np.zeros(RATE * 3), RATE, source="silent.wav")
-    with pytest.raises(RealPenError, match="select"):
+    with pytest.raises(ParameterError, match="^selection: unknown value 'best'"):
         select_units(np.zeros((40, 24)), 15, "best")
+
+
+@pytest.mark.parametrize("options, parameter", [
+    ({"unit_ms": -1}, "unit_ms"), ({"unit_ms": float("nan")}, "unit_ms"), ({"top": 0}, "top"),
+    ({"count": 0}, "count"), ({"selection": "best"}, "selection"), ({"rate": 0}, "rate"),
+])
+def test_bad_arguments_name_the_python_parameter(options, parameter):
+    x = sines([100], [1], RATE, 3.0)
+    arguments = {"rate": RATE, **options}
+    with pytest.raises(ParameterError) as caught:
+        analyze(x, **arguments)
+    assert caught.value.parameter == parameter
+    assert str(caught.value).startswith(f"{parameter}: ")
+    assert "--" not in str(caught.value)  # never a flag of the command line
+    with pytest.raises(ParameterError, match="^unit_ms: "):
+        principal_frequencies(x, RATE, unit_ms=0)
 
 
 def test_analysis_json_shape():

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from realpen.tactile.actuator import parse_actuator
 from realpen.datasets.hatt import load_hatt, synthesize
-from realpen.tactile.pattern import TactileParams, build_pattern
+from realpen.tactile.actuator import parse_actuator
+from realpen.tactile.build import build_pattern
+from realpen.tactile.conditions import TactileParams
 
 PAPERS = ["Book", "Resume Paper", "Tissue Paper", "Playing Card", "Cardboard", "Paper Bag"]
 

@@ -1,13 +1,260 @@
 """RealPen: the feel and sound of a real pen on paper, for touch screens.
 
 The library is numpy in, numpy out; the ``realpen`` command and the live app are thin shells
-over it. Start with :func:`realpen.recording.load_recording` and
-:func:`realpen.tactile.build_pattern`.
+over it. ``import realpen as rp`` gives the curated API below; every name is imported on first
+use, so ``import realpen`` itself is light (no numpy, scipy or matplotlib until they are needed).
+
+- Recordings: :func:`load_recording`, :class:`Recording`, :func:`load_hatt` (HaTT texture models).
+- Tactile: :func:`analyze`, :func:`tactile_pattern`, :class:`TactilePattern`, :class:`Actuator`,
+  :func:`parse_actuator`.
+- Sound: :func:`find_loop`, :class:`SoundLoop`, :class:`Coupling` (Eq. 1).
+- Pen profiles and exports: :func:`load_profile`, :func:`save_profile`, :func:`list_profiles`,
+  :func:`export`.
+- Figures: :mod:`realpen.display` (every function draws into a given ``ax``).
+- Errors: :class:`RealPenError` (bad data), :class:`ParameterError` (bad arguments).
+
+Options are keyword-only everywhere. Example:
+
+>>> import realpen as rp
+>>> from realpen.examples import example_recording_path
+>>> recording = rp.load_recording(example_recording_path())
+>>> pattern = rp.tactile_pattern(recording, actuator="lra:f0=175,q=8", condition="B")
+>>> pattern
+TactilePattern(15 sub-patterns × 100 ms, 10 components each, 8000 Hz, lra:f0=175,q=8)
 """
 
+from __future__ import annotations
+
+import importlib
 from importlib.metadata import PackageNotFoundError, version
 
 try:
     __version__ = version("realpen")
 except PackageNotFoundError:  # running from a source tree that was never installed
     __version__ = "0.0.0+unknown"
+
+__all__ = [
+    "__version__",
+    # recordings and analysis
+    "load_recording", "Recording", "analyze", "load_hatt",
+    # tactile patterns
+    "tactile_pattern", "TactilePattern", "Actuator", "parse_actuator",
+    # sound
+    "find_loop", "SoundLoop", "Coupling",
+    # profiles and exports
+    "load_profile", "save_profile", "list_profiles", "export",
+    # errors
+    "RealPenError", "ParameterError",
+    # figures (a subpackage, imported on first use: it needs matplotlib)
+    "display",
+]
+
+# Names re-exported from the library, imported on first access (PEP 562).
+_LAZY: dict[str, str] = {
+    "Recording": "realpen.io.recording",
+    "load_hatt": "realpen.datasets.hatt",
+    "TactilePattern": "realpen.tactile.pattern",
+    "Actuator": "realpen.tactile.actuator",
+    "parse_actuator": "realpen.tactile.actuator",
+    "find_loop": "realpen.sound.loop",
+    "SoundLoop": "realpen.sound.loop",
+    "Coupling": "realpen.sound.coupling",
+    "load_profile": "realpen.profile.bundle",
+    "save_profile": "realpen.profile.bundle",
+    "list_profiles": "realpen.profile.registry",
+    "RealPenError": "realpen.errors",
+    "ParameterError": "realpen.errors",
+}
+_SUBPACKAGES = ("display", "io", "dsp", "tactile", "sound", "profile", "exports", "datasets",
+                "examples", "errors", "pens", "live", "cli")
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value  # the next access is a plain attribute lookup
+        return value
+    if name in _SUBPACKAGES:
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+def analyze(data, *, rate: float | None = None, unit_ms: float = 100.0, top: int = 10,
+            count: int = 15, selection: str = "stationary", highpass_hz: float = 30.0,
+            fmin: float | None = None, fmax: float | None = None, axis: str | None = None,
+            analysis_rate: float | None = None, min_separation_hz: float | None = None,
+            progress=None):
+    """Principal frequencies of every unit sequence of a recording or an array.
+
+    The input is prepared as the tactile pipeline prepares it — axes to one by DFT321, an
+    optional resampling, a zero-phase high-pass — then split into ``unit_ms`` units whose top
+    ``top`` spectral peaks are kept, and ``count`` consecutive units are selected.
+
+    Args:
+        data: a :class:`Recording`, or an array of shape (frames,) or (frames, axes).
+        rate: the array's sampling rate in Hz (required for an array; a recording has its own).
+        unit_ms: unit sequence length in ms.
+        top: principal frequencies kept per unit.
+        count: consecutive units to select (never the first or the last unit).
+        selection: ``"stationary"`` (the steadiest run) or ``"middle"``.
+        highpass_hz: high-pass cutoff in Hz (0: none).
+        fmin, fmax: band in Hz where peaks count (default: ``highpass_hz`` to Nyquist).
+        axis: how axes become one: ``"dft321"`` (default for several), ``"magnitude"`` or an
+            axis name.
+        analysis_rate: resample to this rate in Hz first (default: keep the rate).
+        min_separation_hz: two peaks closer than this are one (default 1000 / unit_ms Hz).
+        progress: called as ``progress(units_done, units_total)``.
+
+    Returns:
+        A :class:`realpen.dsp.spectrum.Analysis`.
+
+    Raises:
+        ParameterError: a bad option, or an array without ``rate``.
+        RealPenError: silent, constant or too short input.
+
+    Example:
+        >>> import numpy as np, realpen as rp
+        >>> t = np.arange(4 * 1344) / 1344
+        >>> analysis = rp.analyze(np.sin(2 * np.pi * 180 * t), rate=1344, top=1)
+        >>> round(float(analysis.frequencies_hz[5, 0]))
+        180
+    """
+    from realpen.dsp.filters import prepare
+    from realpen.dsp.spectrum import analyze as analyze_signal
+
+    recording = _as_recording(data, rate)
+    prepared = prepare(recording, axis, analysis_rate, highpass_hz)
+    return analyze_signal(prepared.mono, prepared.rate, unit_ms, top, count, selection,
+                          fmin=highpass_hz if fmin is None else fmin, fmax=fmax,
+                          min_separation_hz=min_separation_hz, source=recording.source,
+                          progress=progress)
+
+
+def _as_recording(data, rate: float | None):
+    """A :class:`Recording` as it is, or an array of shape (frames[, axes]) wrapped in one."""
+    import numpy as np
+
+    from realpen.errors import ParameterError, require_number
+    from realpen.io.recording import Recording
+
+    if isinstance(data, Recording):
+        if rate is not None and rate != data.rate:
+            raise ParameterError("rate", f"a Recording carries its own rate ({data.rate:g} Hz); "
+                                         f"give rate only with an array")
+        return data
+    if rate is None:
+        raise ParameterError("rate", "needed in Hz when the data is an array")
+    require_number("rate", rate, minimum=0.0, inclusive=False)
+    try:
+        samples = np.asarray(data, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError("data", f"must be a Recording or an array of numbers, not "
+                                     f"{type(data).__name__}") from None
+    if samples.ndim == 1:
+        samples = samples[:, None]
+    if samples.ndim != 2 or samples.shape[0] == 0:
+        raise ParameterError("data", f"must have shape (frames,) or (frames, axes), got "
+                                     f"{samples.shape}")
+    if samples.shape[1] > samples.shape[0]:
+        raise ParameterError("data", f"shape {samples.shape} has more axes than frames; "
+                                     f"pass (frames, axes), e.g. data.T")
+    if not np.all(np.isfinite(samples)):
+        raise ParameterError("data", "contains NaN or infinite values")
+    count = samples.shape[1]
+    axes = ("x", "y", "z")[:count] if count <= 3 else tuple(f"ch{i}" for i in range(count))
+    return Recording(samples, float(rate), axes, source="array")
+
+
+def load_recording(path, *, rate: float | None = None, units: str | None = None):
+    """Load a vibration recording from WAV/FLAC/OGG, CSV or NPZ.
+
+    Args:
+        path: the file; its suffix picks the reader (``.csv``, ``.npz``, else audio).
+        rate: sampling rate in Hz for a CSV with no time column or an NPZ with no ``rate``.
+        units: the unit of the samples, overriding the file's (``"m/s^2"``, ``"g"``, ...).
+
+    Returns:
+        A :class:`Recording` (samples of shape (frames, axes), rate, axes, units, provenance).
+
+    Raises:
+        RealPenError: a missing, empty, truncated or unreadable file, NaN/inf samples.
+        ParameterError: a bad ``rate``, or none where the file does not carry one.
+
+    Example:
+        >>> import realpen as rp
+        >>> from realpen.examples import example_recording_path
+        >>> recording = rp.load_recording(example_recording_path())
+        >>> recording.rate, recording.axes, recording.samples.shape
+        (1344.0, ('x', 'y', 'z'), (16128, 3))
+    """
+    from realpen.io.recording import load_recording as load
+
+    return load(path, rate=rate, units=units)
+
+
+def tactile_pattern(recording, *, actuator="lra:f0=175,q=8", condition: str | None = None,
+                    **options):
+    """Build the looping, actuator-equalised tactile pattern of a vibration recording.
+
+    Runs the whole tactile pipeline: axes to one, high-pass, unit spectra, the top-N principal
+    frequencies of K consecutive units, the weighting 1/|H(f)| of the actuator, and the
+    superposed, crossfaded sub-patterns (:func:`realpen.tactile.build.tactile_pattern`).
+
+    Args:
+        recording: a :class:`Recording` (see :func:`load_recording`) or the path of one.
+        actuator: an :class:`Actuator` or a spec string (``"lra:f0=175,q=8"``,
+            ``"piezo:f0=300,q=2"``, ``"flat"`` or the path of a measured-response CSV).
+        condition: study condition ``"A"``–``"F"``. None gives condition B (the method's
+            choice: 10 frequencies × 15 sub-patterns of 100 ms) unless ``top``,
+            ``subpatterns`` or ``unit_ms`` are given; a condition and counts that disagree
+            are refused.
+        options: any other parameter of the pipeline by keyword (``top``, ``subpatterns``,
+            ``unit_ms``, ``rate`` in Hz, ``seed``, ``boundary``, ``cap_db``, ``selection``,
+            ...; see :class:`realpen.tactile.conditions.TactileParams`).
+
+    Returns:
+        The :class:`TactilePattern`.
+
+    Example:
+        >>> import realpen as rp
+        >>> from realpen.examples import example_recording_path
+        >>> recording = rp.load_recording(example_recording_path())
+        >>> rp.tactile_pattern(recording, actuator="lra:f0=175,q=8", condition="E")
+        TactilePattern(1 sub-pattern × 1500 ms, 10 components each, 8000 Hz, lra:f0=175,q=8)
+    """
+    from realpen.tactile.build import tactile_pattern as build
+
+    return build(recording, actuator, condition=condition, **options)
+
+
+def export(fmt: str, path, item, *, sound=None, coupling=None, **options):
+    """Write a tactile pattern (or a whole pen profile) in one of the export formats.
+
+    Args:
+        fmt: ``"wav"``, ``"c-header"``, ``"ahap"``, ``"haptic"``, ``"android"`` or ``"hjif"``.
+        path: the file to write; companion files (an AHAP's sound) are written beside it.
+        item: a :class:`TactilePattern`, or a pen profile (:func:`load_profile`), which brings
+            its own sound loop and coupling.
+        sound: a :class:`SoundLoop` to go with a pattern (``wav`` with ``stereo=True`` and the
+            ``ahap`` sound events need one).
+        coupling: the :class:`Coupling` constants (the Android export carries them).
+        options: the format's own options (``stereo=True``, ``rate=44100``, ``repeats=2``, ...;
+            see :mod:`realpen.exports`).
+
+    Returns:
+        What was written: ``path``, ``companions`` and the rendered ``export``.
+
+    Example:
+        >>> import tempfile, pathlib, realpen as rp
+        >>> folder = pathlib.Path(tempfile.mkdtemp())
+        >>> written = rp.export("ahap", folder / "pencil.ahap", rp.load_profile("pencil"))
+        >>> sorted(p.name for p in folder.iterdir())
+        ['pencil-sound.wav', 'pencil.ahap']
+    """
+    from realpen.exports import export as write
+
+    return write(fmt, path, item, sound=sound, coupling=coupling, **options)

@@ -1,13 +1,19 @@
-"""The ``realpen`` command: a thin shell over the library.
+"""The ``realpen`` command: argument parsing and the flag map only, a thin shell over the library.
 
 Every subcommand lives in its own module and registers itself on :data:`app`. Problems with the
 user's input surface as :class:`realpen.errors.RealPenError` and are printed as one line on
-stderr with exit code 2.
+stderr with exit code 2; a :class:`realpen.errors.ParameterError` (worded with a Python
+parameter name) is shown with the command's flag instead (:mod:`realpen.cli.flags`).
+
+May import: typer, rich and :mod:`realpen.errors` at module level; numpy, scipy, soundfile,
+matplotlib, FastAPI and the rest of the library only inside the command functions, so that
+``realpen --help`` answers at once.
 """
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 
 import typer
 
@@ -16,7 +22,12 @@ try:  # recent typer releases carry their own copy of click
 except ImportError:  # older typer uses click itself
     from click import exceptions as click_errors
 
-from realpen.errors import RealPenError
+from realpen.errors import ParameterError, RealPenError
+
+__all__ = ["app", "main", "command_path", "CONTEXT_SETTINGS"]
+
+# -h works wherever --help does; child contexts inherit it, the sub-apps repeat it to be plain.
+CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"]}
 
 app = typer.Typer(
     name="realpen",
@@ -24,13 +35,62 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    context_settings=CONTEXT_SETTINGS,
 )
 
 
-def main() -> None:
-    """Entry point of the ``realpen`` console script: every failure is one line on stderr."""
+def _show_version(value: bool) -> None:
+    if value:
+        from realpen import __version__
+
+        print(f"realpen {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_show_version, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    """RealPen: the feel and sound of a real pen on paper, for touch screens."""
+
+
+def command_path(args: Sequence[str]) -> str:
+    """The subcommand that ``args`` (the arguments after ``realpen``) runs, e.g. ``"sound loop"``.
+
+    Options are skipped; the walk stops at the first word that is not a subcommand. Empty for
+    the top level.
+    """
+    command = typer.main.get_command(app)
+    path: list[str] = []
+    for token in args:
+        if token == "--":
+            break
+        if token.startswith("-"):
+            continue
+        commands = getattr(command, "commands", None)
+        if not commands or token not in commands:
+            break
+        command = commands[token]
+        path.append(token)
+    return " ".join(path)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Entry point of the ``realpen`` console script: every failure is one line on stderr.
+
+    Args:
+        argv: the arguments after ``realpen`` (default: ``sys.argv[1:]``).
+
+    Exits with 0 on success, 2 on bad input or usage, 130 when interrupted.
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
     try:
-        code = app(prog_name="realpen", standalone_mode=False)
+        code = app(args=args, prog_name="realpen", standalone_mode=False)
+    except ParameterError as error:
+        from realpen.cli.flags import describe
+
+        _fail(describe(error, command_path(args)), 2)
     except RealPenError as error:
         _fail(str(error), 2)
     except click_errors.NoArgsIsHelpError:
@@ -50,9 +110,10 @@ def _fail(message: str, code: int) -> None:
     sys.exit(code)
 
 
-# Subcommand modules register themselves on `app` when imported.
-from realpen.cli import tactile_cmds  # noqa: E402,F401
+# Subcommand modules register themselves on `app` when imported; they import nothing heavy.
+from realpen.cli import tactile_cmds  # noqa: E402,F401,I001
 from realpen.cli import sound_cmds  # noqa: E402,F401
 from realpen.cli import profile_cmds  # noqa: E402,F401
 from realpen.cli import serve_cmds  # noqa: E402,F401
 from realpen.cli import export_cmds  # noqa: E402,F401
+from realpen.cli import hatt_cmds  # noqa: E402,F401

@@ -2,4 +2,5 @@
 
 from realpen.cli import main
 
-main()
+if __name__ == "__main__":  # importing (pytest --doctest-modules does) runs nothing
+    main()

@@ -1,34 +1,46 @@
-"""``realpen export``: a pen profile in the formats haptic platforms read."""
+"""``realpen export``: a pen profile in the formats haptic platforms read.
+
+Only typer and the standard library are imported here; the exports (numpy, scipy) are imported
+inside the command, so ``realpen --help`` stays fast.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
-from realpen.exports import export_profile, format_names
-from realpen.profile.bundle import resolve_profile
 from realpen.cli import app
-from realpen.cli.common import console
+from realpen.cli.common import check_outputs, console, force_option
+
+# realpen.exports.FORMATS, written out so that help needs no numpy; a test checks they agree.
+FORMAT_NAMES = ("wav", "c-header", "ahap", "haptic", "android", "hjif")
 
 
 @app.command()
 def export(
     profile: str = typer.Argument(..., help="Profile name (pencil, ballpoint, marker, …) or a "
                                             "bundle folder or .zip."),
-    fmt: str = typer.Option(..., "--format", "-f", help=f"One of: {format_names()}."),
+    fmt: str = typer.Option(..., "--format", "-f", help=f"One of: {', '.join(FORMAT_NAMES)}."),
     output: Path = typer.Option(..., "-o", "--output", help="File to write. For android, a "
                                                            ".kt name writes the Kotlin alone."),
-    stereo: Optional[bool] = typer.Option(None, "--stereo",
-                                          help="wav: sound left, tactile pattern right."),
-    rate: Optional[int] = typer.Option(None, "--rate",
-                                       help="wav, c-header: output rate in Hz (polyphase)."),
-    repeats: Optional[int] = typer.Option(None, "--repeats",
-                                          help="Periods to write, for formats without a loop "
-                                               "flag (and wav, android)."),
+    stereo: bool | None = typer.Option(None, "--stereo",
+                                       help="wav: sound left, tactile pattern right."),
+    rate: int | None = typer.Option(None, "--rate",
+                                    help="wav, c-header: output rate in Hz (polyphase)."),
+    repeats: int | None = typer.Option(None, "--repeats",
+                                       help="Periods to write, for formats without a loop "
+                                            "flag (and wav, android)."),
+    force: bool = force_option(),
 ) -> None:
-    """Export a pen profile: wav, c-header, ahap, haptic, android or hjif."""
+    """Export a pen profile: wav, c-header, ahap, haptic, android or hjif.
+
+    An existing output (or a companion file, e.g. an AHAP's sound) is replaced only with --force.
+    """
+    from realpen.exports import companion_paths, export_profile
+    from realpen.profile import resolve_profile
+
+    check_outputs(output, *companion_paths(fmt, output), force=force)
     loaded = resolve_profile(profile)
     written = export_profile(loaded, fmt, output, stereo=stereo or None, rate=rate,
                              repeats=repeats)

@@ -5,18 +5,18 @@ from __future__ import annotations
 import ipaddress
 import signal
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 
-from realpen.errors import RealPenError
+from realpen.cli import CONTEXT_SETTINGS, app
+from realpen.cli.common import check_outputs, console, force_option
+from realpen.errors import RealPenError, require_choice
 from realpen.io.paths import default_store
-from realpen.cli import app
-from realpen.cli.common import console
 
 TACTILE_CHOICES = ("audio", "none")
 
-strokes_app = typer.Typer(help="The strokes the live app stored.", no_args_is_help=True)
+strokes_app = typer.Typer(help="The strokes the live app stored.", no_args_is_help=True,
+                          context_settings=CONTEXT_SETTINGS)
 app.add_typer(strokes_app, name="strokes")
 
 
@@ -35,12 +35,12 @@ def _interrupt(signum, frame):
 
 @app.command()
 def serve(
-    host: Optional[str] = typer.Option(
+    host: str | None = typer.Option(
         None, "--host", help="Address to listen on (default 127.0.0.1; with --lan 0.0.0.0)."),
     port: int = typer.Option(8765, "--port", help="Port to listen on (0: any free port)."),
-    profiles: List[Path] = typer.Option(
+    profiles: list[Path] = typer.Option(
         [], "--profiles", help="A folder of extra pen profiles (repeatable)."),
-    store: Optional[Path] = typer.Option(
+    store: Path | None = typer.Option(
         None, "--store", help="SQLite stroke store (default: strokes.sqlite3 in the data folder)."),
     tactile: str = typer.Option(
         "none", "--tactile",
@@ -55,10 +55,7 @@ def serve(
     from realpen.live.auth import LOOPBACK_HOSTS, new_token
     from realpen.live.server import bind, lan_address, run, url_host
 
-    if tactile not in TACTILE_CHOICES:
-        raise RealPenError(f"--tactile: choose audio or none, got '{tactile}'")
-    if not 0 <= port <= 65535:
-        raise RealPenError(f"--port: {port} is not a port number (0–65535)")
+    require_choice("tactile", tactile, TACTILE_CHOICES)
     host = host or ("0.0.0.0" if lan else "127.0.0.1")
     if not lan and not _is_loopback(host):
         raise RealPenError(f"--host {host}: other machines could reach it; add --lan (every "
@@ -107,16 +104,18 @@ def serve(
 @strokes_app.command("export")
 def export(
     output: Path = typer.Option(..., "-o", "--output", help="CSV to write, one row per sample."),
-    store: Optional[Path] = typer.Option(
+    store: Path | None = typer.Option(
         None, "--store", help="SQLite stroke store (default: strokes.sqlite3 in the data folder)."),
-    stroke: Optional[int] = typer.Option(
+    stroke: int | None = typer.Option(
         None, "--stroke", help="Only this stroke (its id in the store): a trajectory for "
                                "`realpen sound render`."),
+    force: bool = force_option(),
 ) -> None:
     """Write the stored strokes as CSV: stroke, pen, modality, …, t, x, y, pressure, tilt, speed."""
     from realpen.live.store import export_csv
 
     store = store or default_store()
+    check_outputs(output, force=force, inputs={"stroke store": store})
     strokes, rows = export_csv(store, output, stroke)
     console.print(f"wrote {output}: {rows} samples of {strokes} strokes from {store}",
                   highlight=False)

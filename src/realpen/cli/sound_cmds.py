@@ -1,29 +1,40 @@
-"""``realpen sound loop | render | fit``: friction sound, Eq. 1 coupling, stroke rendering."""
+"""``realpen sound loop | render | fit``: friction sound, Eq. 1 coupling, stroke rendering.
+
+Only typer and the standard library are imported here; the library (numpy, scipy, soundfile)
+is imported inside the commands, so ``realpen --help`` stays fast.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
-import numpy as np
 import typer
 
-from realpen.sound.coupling import FIXABLE, Coupling, fit_coupling, load_measurements
-from realpen.errors import RealPenError, fail
-from realpen.io.files import json_text, wav_bytes, write_files
-from realpen.sound.granular import GRAIN_MS, LENGTH_MS, MAX_LENGTH_MS, granular_loop
-from realpen.sound.loop import (CROSSFADE_MS, DEFAULT_RATE, MAX_RATE, MIN_RATE, REFERENCE_DBFS, UNIT_MS,
-                     check_level, check_ms, find_loop_unit, load_sound)
-from realpen.sound.stroke import MODES, load_trajectory, render_stroke
-from realpen.cli import app
-from realpen.cli.common import console, progress_bar
+from realpen.cli import CONTEXT_SETTINGS, app
+from realpen.cli.common import check_outputs, console, force_option, progress_bar
+from realpen.errors import RealPenError
 
 sound_app = typer.Typer(
     help="Friction sound: seamless loop units, the pressure/speed coupling (Eq. 1), and what a "
          "stroke sounds like.",
     no_args_is_help=True,
+    context_settings=CONTEXT_SETTINGS,
 )
 app.add_typer(sound_app, name="sound")
+
+# Defaults and limits of realpen.sound.loop and realpen.sound.granular (UNIT_MS, CROSSFADE_MS,
+# DEFAULT_RATE, MIN_RATE, MAX_RATE, REFERENCE_DBFS, GRAIN_MS, LENGTH_MS, MAX_LENGTH_MS), written
+# out so that help needs no numpy; a test checks that they agree with the library's.
+UNIT_MS = 300.0
+CROSSFADE_MS = 10.0
+DEFAULT_RATE = 48000
+MIN_RATE = 8000.0
+MAX_RATE = 384000.0
+REFERENCE_DBFS = -20.0
+GRAIN_MS = 50.0
+LENGTH_MS = 3000.0
+MAX_LENGTH_MS = 60000.0
+MODES = ("loop", "granular")
 
 MODE_HELP = "loop (one seamless unit) | granular (overlapping grains, no repetition)."
 RATE_HELP = (f"Resample the sound to this rate in Hz ({MIN_RATE:g} to {MAX_RATE:g}; lower rates "
@@ -37,24 +48,11 @@ GRAIN_HELP = "Granular mode: grain length in ms (positive)."
 PROGRESS_AFTER_S = 60.0  # the scan takes about a second per 130 s of recording
 
 
-def _check_mode(mode: str) -> str:
-    if mode not in MODES:
-        raise RealPenError(f"--mode: unknown mode '{mode}' (choose from {', '.join(MODES)})")
-    return mode
-
-
-def _check_targets(*targets: Optional[Path]) -> None:
-    """Refuse one file given for two outputs, before any work is done."""
-    given = [target for target in targets if target is not None]
-    for index, target in enumerate(given):
-        for other in given[:index]:
-            if target.resolve() == other.resolve():
-                raise fail(target, "given for two outputs; name a different file for each")
-
-
 def _json_bytes(data: object, target: Path) -> bytes:
     """Indented UTF-8 JSON of ``data``, built before anything is written; NaN or infinity is a
     one-line error naming ``target`` (``json.dumps(allow_nan=False)`` in :func:`json_text`)."""
+    from realpen.io.files import json_text
+
     return json_text(data, target).encode("utf-8")
 
 
@@ -73,31 +71,34 @@ def loop(
     seed: int = typer.Option(0, "--seed", help="Granular mode: seed of the grain offsets."),
     rate: float = typer.Option(DEFAULT_RATE, "--rate", help=RATE_HELP),
     level_dbfs: float = typer.Option(REFERENCE_DBFS, "--level-dbfs", help=LEVEL_HELP),
-    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the report as JSON."),
+    json_out: Path | None = typer.Option(None, "--json", help="Write the report as JSON."),
+    force: bool = force_option(),
 ) -> None:
     """Cut the most seamless loop unit from a recording (or build a granular texture).
 
     Refuses a recording shorter than unit + crossfade; WAV and JSON are written both or neither.
     """
-    _check_mode(mode)
-    for name, value in (("--unit-ms", unit_ms), ("--crossfade-ms", crossfade_ms),
-                        ("--length-ms", length_ms), ("--grain-ms", grain_ms)):
-        check_ms(name, value)
-    check_level(level_dbfs)
-    _check_targets(output, json_out)
+    from realpen.errors import require_choice
+    from realpen.io.files import write_files
+    from realpen.sound.granular import granular_loop
+    from realpen.sound.loop import find_loop, load_sound
+
+    require_choice("mode", mode, MODES)  # the command picks the function by mode
+    check_outputs(output, json_out, force=force, inputs={"recording": recording})
     sound = load_sound(recording, rate)
     if mode == "loop":
         with progress_bar("scanning", sound.duration > PROGRESS_AFTER_S) as progress:
-            result = find_loop_unit(sound.mono, sound.rate, unit_ms, crossfade_ms,
-                                    source=recording, recording=sound, progress=progress)
+            result = find_loop(sound, unit_ms=unit_ms, crossfade_ms=crossfade_ms,
+                               source=recording, progress=progress)
         result = result.normalised(level_dbfs)
-        where = f"unit at {result.start_s:.3f} s"
+        where = (f"unit at {result.start_s:.3f} s" if result.searched
+                 else "the file's own smpl loop")
     else:
-        result = granular_loop(sound.mono, sound.rate, length_ms, grain_ms, seed, level_dbfs,
-                               source=recording, recording=sound)
-        steady = sum(b - a for a, b in result.part.stretches) / sound.rate
+        result = granular_loop(sound, length_ms=length_ms, grain_ms=grain_ms, seed=seed,
+                               level_dbfs=level_dbfs, source=recording)
+        steady = sum(b - a for a, b in result.part.stretches) / result.rate
         where = f"grains from {steady:.2f} s of steady sound"
-    files = {output: wav_bytes(result.samples, int(round(result.rate)))}
+    files = {output: result.wav_bytes()}  # the WAV's smpl chunk declares the loop
     if json_out is not None:
         files[json_out] = _json_bytes(result.to_json(), json_out)
     write_files(files)
@@ -116,37 +117,45 @@ def render(
     trajectory_path: Path = typer.Option(..., "--trajectory",
                                          help="Stroke CSV: t,x,y,pressure (s, mm, mm, 0–1)."),
     output: Path = typer.Option(..., "-o", "--output", help="WAV to write."),
-    coupling_path: Optional[Path] = typer.Option(
+    coupling_path: Path | None = typer.Option(
         None, "--coupling", help="Coupling JSON (default constants if absent)."),
     mode: str = typer.Option("loop", "--mode", help=MODE_HELP),
-    find_unit: Optional[bool] = typer.Option(
+    find_unit: bool | None = typer.Option(
         None, "--find-unit/--as-loop",
         help="Loop mode: search the recording for its loop unit (the default; a file shorter "
              "than the unit plus the crossfade is then refused), or play the file as it is as "
-             "a ready loop (e.g. a WAV written by 'realpen sound loop')."),
+             "a ready loop (for loops made elsewhere: a WAV whose smpl chunk declares its "
+             "loop, as 'realpen sound loop' writes it, is always played as a ready loop)."),
     unit_ms: float = typer.Option(UNIT_MS, "--unit-ms", help=UNIT_HELP),
     crossfade_ms: float = typer.Option(CROSSFADE_MS, "--crossfade-ms", help=CROSSFADE_HELP),
     grain_ms: float = typer.Option(GRAIN_MS, "--grain-ms", help=GRAIN_HELP),
     seed: int = typer.Option(0, "--seed", help="Granular mode: seed of the grain offsets."),
     rate: float = typer.Option(DEFAULT_RATE, "--rate", help=RATE_HELP),
     level_dbfs: float = typer.Option(REFERENCE_DBFS, "--level-dbfs", help=LEVEL_HELP),
+    force: bool = force_option(),
 ) -> None:
     """Render what a stroke sounds like, with the pressure/speed coupling.
 
-    Loop mode searches the sound for its unit; --as-loop plays a ready loop file as it is.
+    Loop mode searches the sound for its unit; a WAV that declares its loop (smpl chunk, as
+    'realpen sound loop' writes it) and, with --as-loop, any file are played as ready loops.
     """
-    _check_mode(mode)
+    import numpy as np
+
+    from realpen.errors import fail
+    from realpen.io.files import wav_bytes, write_files
+    from realpen.sound.coupling import Coupling
+    from realpen.sound.loop import load_sound
+    from realpen.sound.stroke import load_trajectory, render_stroke
+
     if mode != "loop" and find_unit is not None:
         raise RealPenError("--find-unit/--as-loop: only for --mode loop")
-    for name, value in (("--unit-ms", unit_ms), ("--crossfade-ms", crossfade_ms),
-                        ("--grain-ms", grain_ms)):
-        check_ms(name, value)
-    check_level(level_dbfs)
+    check_outputs(output, force=force, inputs={"sound": sound_path, "trajectory": trajectory_path,
+                                               "coupling": coupling_path})
     coupling = Coupling.load(coupling_path) if coupling_path is not None else Coupling()
     trajectory = load_trajectory(trajectory_path)
     sound = load_sound(sound_path, rate)
     with progress_bar("scanning", sound.duration > PROGRESS_AFTER_S) as progress:
-        rendered = render_stroke(sound.mono, sound.rate, trajectory, coupling, mode,
+        rendered = render_stroke(sound, sound.rate, trajectory, coupling, mode,
                                  find_unit=find_unit is not False, unit_ms=unit_ms,
                                  crossfade_ms=crossfade_ms, grain_ms=grain_ms, seed=seed,
                                  level_dbfs=level_dbfs, source=sound_path, progress=progress)
@@ -167,20 +176,23 @@ def fit(
     output: Path = typer.Option(..., "-o", "--output", help="Coupling JSON to write."),
     fix: str = typer.Option("c_ov", "--fix", help="Threshold held fixed: c_ov or c_op "
                                                   "(only their weighted sum is identifiable)."),
-    value: Optional[float] = typer.Option(
+    value: float | None = typer.Option(
         None, "--value", help="Its value, finite (default: the base coupling's; c_ov in mm/s, "
                               "c_op in normalised pressure)."),
-    base_path: Optional[Path] = typer.Option(None, "--base", help="Coupling JSON supplying "
-                                             "a_max, smoothing and playback rate."),
-    json_out: Optional[Path] = typer.Option(None, "--json", help="Write a fit report as JSON."),
+    base_path: Path | None = typer.Option(None, "--base", help="Coupling JSON supplying "
+                                                               "a_max, smoothing and playback rate."),
+    json_out: Path | None = typer.Option(None, "--json", help="Write a fit report as JSON."),
+    force: bool = force_option(),
 ) -> None:
     """Fit c_p, c_op, c_x, c_ov of Eq. 1 to measurements by least squares.
 
     The coupling JSON and the report are written together or not at all.
     """
-    if fix not in FIXABLE:
-        raise RealPenError(f"--fix: choose from {', '.join(FIXABLE)}, got '{fix}'")
-    _check_targets(output, json_out)
+    from realpen.io.files import write_files
+    from realpen.sound.coupling import Coupling, fit_coupling, load_measurements
+
+    check_outputs(output, json_out, force=force,
+                  inputs={"measurements": measurements, "base coupling": base_path})
     base = Coupling.load(base_path) if base_path is not None else Coupling()
     pressure, speed, amplitude = load_measurements(measurements)
     result = fit_coupling(pressure, speed, amplitude, fix, value, base, source=measurements)

@@ -1,24 +1,24 @@
-"""``realpen analyze`` and ``realpen tactile``."""
+"""``realpen analyze`` and ``realpen tactile``.
+
+Only typer and the standard library are imported here; the library (numpy, scipy, soundfile)
+is imported inside the commands, so ``realpen --help`` stays fast.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
-import numpy as np
 import typer
-from rich.table import Table
 
-from realpen.tactile.actuator import parse_actuator
-from realpen.io.files import json_text, wav_bytes, write_files, write_json
-from realpen.io.recording import load_recording
-from realpen.dsp.filters import prepare
-from realpen.dsp.spectrum import analyze as analyze_signal
-from realpen.tactile.pattern import CONDITIONS, TactileParams, build_pattern
 from realpen.cli import app
-from realpen.cli.common import PROGRESS_AFTER_S, console, progress_bar
+from realpen.cli.common import PROGRESS_AFTER_S, check_outputs, console, force_option, progress_bar
 
 AXIS_HELP = "How axes become one: dft321 (default for several axes), magnitude, or x|y|z."
+# The study-1 conditions as realpen.tactile.conditions.CONDITIONS defines them (principal
+# frequencies × sub-patterns × unit length); written out so that help needs no numpy. A test
+# checks that the two agree.
+CONDITION_HELP = ("Study-1 preset: A=5×15×100ms, B=10×15×100ms, C=15×15×100ms, D=5×1×1500ms, "
+                  "E=10×1×1500ms, F=15×1×1500ms (default B).")
 
 
 @app.command()
@@ -28,16 +28,28 @@ def analyze(
     top: int = typer.Option(10, "--top", help="Principal frequencies per unit."),
     subpatterns: int = typer.Option(15, "--subpatterns", help="Consecutive units to select."),
     highpass_hz: float = typer.Option(30.0, "--highpass", help="High-pass cutoff in Hz."),
-    axis: Optional[str] = typer.Option(None, "--axis", help=AXIS_HELP),
+    axis: str | None = typer.Option(None, "--axis", help=AXIS_HELP),
     select: str = typer.Option("stationary", "--select",
                                help="Which units: stationary (most stationary run) or middle."),
-    rate: Optional[float] = typer.Option(None, "--rate",
-                                         help="Sampling rate in Hz of a CSV with no time column."),
-    analysis_rate: Optional[float] = typer.Option(None, "--analysis-rate",
-                                                  help="Resample to this rate in Hz first."),
-    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the analysis as JSON."),
+    rate: float | None = typer.Option(None, "--rate",
+                                      help="Sampling rate in Hz of a CSV with no time column."),
+    analysis_rate: float | None = typer.Option(None, "--analysis-rate",
+                                               help="Resample to this rate in Hz first."),
+    json_out: Path | None = typer.Option(None, "--json",
+                                         help="Write the analysis of every unit as JSON."),
+    every_unit: bool = typer.Option(False, "--all", help="Print every unit, not only the "
+                                                         "selected ones."),
+    force: bool = force_option(),
 ) -> None:
-    """Print the principal frequencies of every unit sequence of a recording."""
+    """Print the principal frequencies of the selected unit sequences (--all: of every unit)."""
+    from rich.table import Table
+
+    from realpen.dsp.filters import prepare
+    from realpen.dsp.spectrum import analyze as analyze_signal
+    from realpen.io.files import write_json
+    from realpen.io.recording import load_recording
+
+    check_outputs(json_out, force=force, inputs={"recording": recording})
     loaded = load_recording(recording, rate=rate)
     prepared = prepare(loaded, axis, analysis_rate, highpass_hz)
     with progress_bar("analysing", loaded.duration > PROGRESS_AFTER_S) as progress:
@@ -52,11 +64,14 @@ def analyze(
     console.print(f"{len(result.starts_s)} units of {unit_ms:g} ms; selected units {first}–{last} "
                   f"({result.starts_s[first]:.2f}–{result.starts_s[last] + unit_ms / 1000:.2f} s, "
                   f"{select})")
+    shown = range(len(result.starts_s)) if every_unit else result.selected
+    chosen = set(int(i) for i in result.selected)
     table = Table("unit", "start s", f"principal frequencies, Hz (strongest first, top {top})")
-    for index in result.selected:
+    for index in shown:
         freqs, _ = result.unit(int(index))
-        table.add_row(str(int(index)), f"{result.starts_s[index]:.2f}",
-                      " ".join(f"{f:.1f}" for f in freqs))
+        # With --all, a star marks the units the pattern would use.
+        label = f"{int(index)}{'*' if every_unit and int(index) in chosen else ''}"
+        table.add_row(label, f"{result.starts_s[index]:.2f}", " ".join(f"{f:.1f}" for f in freqs))
     console.print(table)
     if json_out is not None:
         console.print(f"wrote {json_out}")
@@ -68,12 +83,10 @@ def tactile(
     output: Path = typer.Option(..., "-o", "--output", help="Pattern WAV to write."),
     actuator: str = typer.Option("lra:f0=175,q=8", "--actuator",
                                  help="lra:f0=..,q=.. | piezo:f0=..,q=.. | flat | measured.csv"),
-    condition: Optional[str] = typer.Option(
-        None, "--condition", help="Study-1 preset: " + ", ".join(
-            f"{k}={n}×{s}×{u:g}ms" for k, (n, s, u) in CONDITIONS.items()) + " (default B)."),
-    top: Optional[int] = typer.Option(None, "--top", help="Principal frequencies per sub-pattern."),
-    subpatterns: Optional[int] = typer.Option(None, "--subpatterns", help="Sub-patterns (K)."),
-    unit_ms: Optional[float] = typer.Option(None, "--unit-ms", help="Sub-pattern length in ms."),
+    condition: str | None = typer.Option(None, "--condition", help=CONDITION_HELP),
+    top: int | None = typer.Option(None, "--top", help="Principal frequencies per sub-pattern."),
+    subpatterns: int | None = typer.Option(None, "--subpatterns", help="Sub-patterns (K)."),
+    unit_ms: float | None = typer.Option(None, "--unit-ms", help="Sub-pattern length in ms."),
     rate: int = typer.Option(8000, "--rate", help="Output rate in Hz."),
     boundary: str = typer.Option("crossfade", "--boundary", help="crossfade | hard."),
     crossfade_ms: float = typer.Option(5.0, "--crossfade-ms", help="Crossfade length in ms."),
@@ -83,25 +96,36 @@ def tactile(
     cap_db: float = typer.Option(20.0, "--cap-db", help="Cap of the actuator weighting in dB."),
     select: str = typer.Option("stationary", "--select", help="stationary | middle."),
     highpass_hz: float = typer.Option(30.0, "--highpass", help="High-pass cutoff in Hz."),
-    axis: Optional[str] = typer.Option(None, "--axis", help=AXIS_HELP),
-    input_rate: Optional[float] = typer.Option(
+    axis: str | None = typer.Option(None, "--axis", help=AXIS_HELP),
+    input_rate: float | None = typer.Option(
         None, "--input-rate", help="Sampling rate in Hz of a CSV with no time column."),
-    analysis_rate: Optional[float] = typer.Option(None, "--analysis-rate",
-                                                  help="Resample to this rate in Hz first."),
-    json_out: Optional[Path] = typer.Option(None, "--json", help="Write components and parameters."),
+    analysis_rate: float | None = typer.Option(None, "--analysis-rate",
+                                               help="Resample to this rate in Hz first."),
+    json_out: Path | None = typer.Option(None, "--json", help="Write components and parameters."),
+    force: bool = force_option(),
 ) -> None:
     """Build the looping tactile pattern of a recording, equalised for an actuator."""
-    params = TactileParams.resolve(condition, top, subpatterns, unit_ms, rate=rate, boundary=boundary,
-                            crossfade_ms=crossfade_ms, amplitude=amplitude, seed=seed,
-                            cap_db=cap_db, selection=select, highpass_hz=highpass_hz, axis=axis,
-                            analysis_rate=analysis_rate)
+    import numpy as np
+
+    from realpen.io.files import json_text, wav_bytes, write_files
+    from realpen.io.recording import load_recording
+    from realpen.tactile.actuator import parse_actuator
+    from realpen.tactile.build import build_pattern
+    from realpen.tactile.conditions import TactileParams
+
+    check_outputs(output, json_out, force=force, inputs={"recording": recording})
+    params = TactileParams.resolve(condition, top, subpatterns, unit_ms, rate=rate,
+                                   boundary=boundary, crossfade_ms=crossfade_ms,
+                                   amplitude=amplitude, seed=seed, cap_db=cap_db,
+                                   selection=select, highpass_hz=highpass_hz, axis=axis,
+                                   analysis_rate=analysis_rate)
     response = parse_actuator(actuator)
-    loaded = load_recording(recording, rate=input_rate, rate_option="--input-rate")
+    loaded = load_recording(recording, rate=input_rate)
     with progress_bar("analysing", loaded.duration > PROGRESS_AFTER_S) as progress:
         pattern = build_pattern(loaded, response, params, progress)
     outputs = {output: wav_bytes(pattern.samples, pattern.rate)}
     if json_out is not None:
-        outputs[json_out] = json_text(pattern.to_json(), json_out).encode("utf-8")
+        outputs[json_out] = json_text(pattern.report(), json_out).encode("utf-8")
     write_files(outputs)
     counts = [len(sub) for sub in pattern.subpatterns]
     console.print(f"wrote {output}: {pattern.duration_s * 1000:.0f} ms at {pattern.rate} Hz, "

@@ -28,9 +28,8 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from realpen.errors import fail
-from realpen.io.files import sha256_of
-from realpen.io.files import check_readable_file
+from realpen.errors import ParameterError, fail, require_number
+from realpen.io.files import check_readable_file, sha256_of
 from realpen.io.recording import Recording
 
 
@@ -126,9 +125,12 @@ class HattModelSet:
 
         A point that no triangle contains gets the nearest vertex's model; at a vertex, that
         vertex's model is returned unchanged (its stored coefficients).
+
+        Raises:
+            ParameterError: ``speed_mm_s`` or ``force_n`` is not a finite number.
         """
-        if not (math.isfinite(speed_mm_s) and math.isfinite(force_n)):
-            raise fail("speed/force", f"must be finite, got {speed_mm_s}, {force_n}")
+        require_number("speed_mm_s", speed_mm_s)
+        require_number("force_n", force_n)
         low, high = self.vertices.min(axis=0), self.vertices.max(axis=0)
         point = np.clip([speed_mm_s, force_n], low, high)
         corners = self.vertices[self.triangles]  # (T, 3, 2); solve p = c + w0 (a - c) + w1 (b - c)
@@ -143,7 +145,10 @@ class HattModelSet:
         if w.max() > 1.0 - 1e-12:
             return self.models[int(self.triangles[best, np.argmax(w)])]
         corner_models = [self.models[i] for i in self.triangles[best]]
-        blend = lambda attr: sum(wk * getattr(m, attr) for wk, m in zip(w, corner_models))
+
+        def blend(attr: str):
+            return sum(wk * getattr(m, attr) for wk, m in zip(w, corner_models))
+
         ar_lsf, ma_lsf = blend("ar_lsf"), blend("ma_lsf")
         return ArmaModel(ar=lsf_to_poly(ar_lsf), ma=lsf_to_poly(ma_lsf), ar_lsf=ar_lsf,
                          ma_lsf=ma_lsf, variance=float(blend("variance")),
@@ -166,7 +171,9 @@ def _values(path: Path, node: ET.Element, tag: str, where: str = "", single: boo
 
 
 def _load_model(path: Path, node: ET.Element, where: str) -> ArmaModel:
-    number = lambda tag: _values(path, node, tag, where, single=True)
+    def number(tag: str) -> float:
+        return _values(path, node, tag, where, single=True)
+
     has_ma = node.find("MAcoeff") is not None
     ar, ar_lsf = _values(path, node, "ARcoeff", where), _values(path, node, "ARlsf", where)
     ma = _values(path, node, "MAcoeff", where) if has_ma else np.ones(1)
@@ -200,7 +207,9 @@ def load_hatt(path: str | os.PathLike) -> HattModelSet:
         raise fail(path, f"not a valid XML file ({error})") from None
     if root.tag != "modelSet":
         raise fail(path, f"not a HaTT model file (root element <{root.tag}>, expected <modelSet>)")
-    number = lambda tag: _values(path, root, tag, single=True)
+    def number(tag: str) -> float:
+        return _values(path, root, tag, single=True)
+
     rate, count = number("SampleRate"), number("numMod")
     if rate <= 0 or count < 3 or count != int(count):
         raise fail(path, "needs a positive <SampleRate> and an integer <numMod> ≥ 3")
@@ -250,22 +259,35 @@ def synthesize(model_set: HattModelSet, speed_mm_s: float | np.ndarray, force_n:
             seconds (block means) and the filter memory carries over (direct form I, as in the
             toolkit).
         duration_s: output length in seconds (rounded to whole samples at ``model_set.rate``).
-        seed: seed of the white-noise excitation; equal seeds give equal outputs.
+        seed: seed of the white-noise excitation (an integer ≥ 0); equal seeds give equal
+            outputs.
+        update_s: how often, in seconds, a time-varying speed or force re-interpolates the model.
 
     Returns:
         A one-axis :class:`Recording` (axis ``"dft321"``, units ``"m/s^2"``) at the set's rate,
         stationary from its first sample (a filter warm-up is discarded).
+
+    Raises:
+        ParameterError: a ``duration_s`` shorter than one sample, a negative or non-integer
+            ``seed``, a non-positive ``update_s``, or a speed or force that is not finite or
+            not one number per output sample.
     """
-    frames = int(round(duration_s * model_set.rate)) if math.isfinite(duration_s) else 0
+    require_number("duration_s", duration_s, minimum=0.0, inclusive=False)
+    frames = int(round(duration_s * model_set.rate))
     if frames < 1:
-        raise fail("duration_s", f"must give at least one sample at {model_set.rate:g} Hz")
+        raise ParameterError("duration_s", f"must give at least one sample at "
+                                           f"{model_set.rate:g} Hz, got {duration_s:g} s")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError("seed", f"must be a whole number >= 0, got {seed!r}")
+    require_number("update_s", update_s, minimum=0.0, inclusive=False)
     tracks = []
     for name, value in (("speed_mm_s", speed_mm_s), ("force_n", force_n)):
         value = np.asarray(value, dtype=np.float64)
         if value.ndim > 1 or (value.ndim == 1 and len(value) != frames):
-            raise fail(name, f"needs one number or {frames} values, got shape {value.shape}")
+            raise ParameterError(name, f"needs one number or {frames} values, got shape "
+                                       f"{value.shape}")
         if not np.all(np.isfinite(value)):
-            raise fail(name, "must be finite")
+            raise ParameterError(name, "must be finite")
         tracks.append(np.broadcast_to(value, (frames,)))
     speeds, forces = tracks
     constant = np.ptp(speeds) == 0 and np.ptp(forces) == 0
@@ -285,7 +307,10 @@ def synthesize(model_set: HattModelSet, speed_mm_s: float | np.ndarray, force_n:
         out.append(signal.lfilter(numerator, model.ar, excitation, zi=state)[0])
         past_y = np.concatenate([past_y, out[-1]])[-len(model.ar):]
         past_e = np.concatenate([past_e, excitation])[-len(model.ma):]
-    span = lambda v, unit: f"{v[0]:g} {unit}" if np.ptp(v) == 0 else f"{v.min():g}–{v.max():g} {unit}"
+
+    def span(v: np.ndarray, unit: str) -> str:
+        return f"{v[0]:g} {unit}" if np.ptp(v) == 0 else f"{v.min():g}–{v.max():g} {unit}"
+
     source = (f"HaTT '{model_set.material}' at {span(speeds, 'mm/s')}, {span(forces, 'N')} "
               f"({Path(model_set.source).name})")
     return Recording(np.concatenate(out[1:]), model_set.rate, ("dft321",), units="m/s^2",

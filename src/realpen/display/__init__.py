@@ -1,8 +1,25 @@
 """Figures with matplotlib: analyses, actuators, patterns, sound loops and profiles.
 
-Every function draws into a given ``ax`` (or makes its own figure when ``ax`` is None), returns
-what it drew on, and changes no global matplotlib state: no backend switch, no ``pyplot``
-figure closed that it did not open.
+Every function draws into a given ``ax`` (or ``axes`` for several panels), or makes its own
+figure when that is None, and returns what it drew on. Nothing here changes global matplotlib
+state: no backend switch, no ``rcParams`` change, and no ``pyplot`` — a figure made here is a
+plain :class:`matplotlib.figure.Figure`, so it never closes, replaces or adds to the user's
+pyplot figures. In a notebook, show a figure by making it the cell's value (``ax.figure``).
+
+- :func:`plot_analysis` — principal frequencies per unit (the method's Figure 4b).
+- :func:`plot_actuator` — actuator response |H(f)| and the capped weighting (Figure 2c–d).
+- :func:`plot_pattern` — a tactile pattern in time and its spectrogram (Figure 8).
+- :func:`plot_sound_loop` — a sound loop's waveform and spectrogram across its wrap.
+- :func:`profile_figure`, :func:`save_profile_plot` — a pen profile (``profile show --plot``).
 
 May import: every library layer (io, dsp, tactile, sound, profile); never live or cli.
 """
+
+from realpen.display.actuator import plot_actuator
+from realpen.display.analysis import plot_analysis
+from realpen.display.pattern import plot_pattern
+from realpen.display.profile import plot_sound_spectrum, profile_figure, save_profile_plot
+from realpen.display.sound import plot_sound_loop
+
+__all__ = ["plot_analysis", "plot_actuator", "plot_pattern", "plot_sound_loop",
+           "plot_sound_spectrum", "profile_figure", "save_profile_plot"]

@@ -12,8 +12,9 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
 
-from realpen.errors import RealPenError, fail, require_number
+from realpen.errors import ParameterError, fail, require_choice, require_number
 from realpen.io.recording import AXIS_CHOICES, Recording
+
 
 def dft321(samples: np.ndarray) -> np.ndarray:
     """Combine axes into one signal by DFT321 (Landin et al., 2010).
@@ -66,19 +67,27 @@ def combine_axes(recording: Recording, axis: str | None = None) -> Recording:
     return recording.with_samples(combined[:, None], f"axis:{axis}", axes=(axis,))
 
 
-def resample(recording: Recording, rate: float) -> Recording:
+def resample(recording: Recording, rate: float, *, parameter: str = "rate") -> Recording:
     """Resample to ``rate`` Hz with a polyphase filter (scipy.signal.resample_poly).
 
     The ratio is approximated to a fraction with a denominator ≤ 1000; the exact rate reached is
     the returned recording's ``rate``.
+
+    Args:
+        recording: any number of axes, at ``recording.rate`` Hz.
+        rate: the new rate in Hz, > 0.
+        parameter: the name the caller gave ``rate`` (e.g. ``"analysis_rate"``), for messages.
+
+    Raises:
+        ParameterError: ``rate`` is not positive, or too low a fraction of the recording's rate.
     """
-    require_number("--analysis-rate", rate, minimum=0.0, inclusive=False)
+    require_number(parameter, rate, minimum=0.0, inclusive=False)
     if abs(rate - recording.rate) < 1e-9:
         return recording
     ratio = Fraction(rate / recording.rate).limit_denominator(1000)
     if ratio.numerator == 0:
-        raise RealPenError(f"--analysis-rate: {rate:g} Hz is too low to resample "
-                           f"{recording.rate:g} Hz to")
+        raise ParameterError(parameter, f"{rate:g} Hz is too low to resample "
+                                        f"{recording.rate:g} Hz to")
     out = signal.resample_poly(recording.samples, ratio.numerator, ratio.denominator, axis=0)
     actual = recording.rate * ratio.numerator / ratio.denominator
     return recording.with_samples(out, f"resample:{actual:g}Hz", rate=actual)
@@ -87,10 +96,16 @@ def resample(recording: Recording, rate: float) -> Recording:
 def highpass(recording: Recording, cutoff_hz: float = 30.0, order: int = 4) -> Recording:
     """Zero-phase Butterworth high-pass (forward-backward, so the effective order is doubled).
 
+    Args:
+        recording: samples at ``recording.rate`` Hz.
+        cutoff_hz: -3 dB point of one pass in Hz (0: no filter).
+        order: Butterworth order of one pass.
+
     Raises:
+        ParameterError: ``cutoff_hz`` is negative or not a number.
         RealPenError: when the rate is too low for the cutoff (Nyquist at or below it).
     """
-    require_number("--highpass", cutoff_hz, minimum=0.0)
+    require_number("cutoff_hz", cutoff_hz, minimum=0.0)
     nyquist = recording.rate / 2
     if cutoff_hz == 0:
         return recording
@@ -103,20 +118,29 @@ def highpass(recording: Recording, cutoff_hz: float = 30.0, order: int = 4) -> R
     return recording.with_samples(filtered, f"highpass:{cutoff_hz:g}Hz")
 
 
-def prepare(recording: Recording, axis: str | None = None, rate: float | None = None,
+def prepare(recording: Recording, axis: str | None = None, analysis_rate: float | None = None,
             highpass_hz: float = 30.0) -> Recording:
     """The method's preprocessing: axes to one, optional resampling, zero-phase high-pass.
 
     Args:
+        recording: one to three (or more) axes at ``recording.rate`` Hz.
         axis: see :func:`combine_axes` (None: DFT321 for several axes).
-        rate: analysis rate in Hz (None: keep the recording's rate).
+        analysis_rate: rate in Hz to resample to (None: keep the recording's rate).
         highpass_hz: high-pass cutoff in Hz (0: none).
+
+    Returns:
+        A one-axis recording at the analysis rate.
+
+    Raises:
+        ParameterError: an unknown ``axis``, a bad ``analysis_rate`` or ``highpass_hz``.
+        RealPenError: the rate is too low for the high-pass, or the result is silence.
     """
-    if axis is not None and axis not in AXIS_CHOICES and axis not in recording.axes:
-        raise RealPenError(f"--axis: unknown axis '{axis}' (choose from {', '.join(AXIS_CHOICES)})")
+    if axis is not None and axis not in recording.axes:
+        require_choice("axis", axis, AXIS_CHOICES)
+    require_number("highpass_hz", highpass_hz, minimum=0.0)  # before the slow steps
     one = combine_axes(recording, axis)
-    if rate is not None:
-        one = resample(one, rate)
+    if analysis_rate is not None:
+        one = resample(one, analysis_rate, parameter="analysis_rate")
     filtered = highpass(one, highpass_hz)
     _check_not_silent(recording, filtered)
     return filtered

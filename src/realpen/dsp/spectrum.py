@@ -9,14 +9,14 @@ several of the N places.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 from scipy import signal
 from scipy.ndimage import maximum_filter1d
 
-from realpen.errors import RealPenError, require_number
+from realpen.errors import RealPenError, fail, require_choice, require_number
 
 ProgressCallback = Callable[[int, int], None]
 SELECTIONS = ("stationary", "middle")
@@ -52,6 +52,12 @@ class Analysis:
     band_levels_db: np.ndarray
     selected: np.ndarray
     selection: str
+
+    def __repr__(self) -> str:
+        chosen = (f"units {int(self.selected[0])}–{int(self.selected[-1])}"
+                  if len(self.selected) else "no units")
+        return (f"Analysis({len(self.starts_s)} units of {self.unit_ms:g} ms at {self.rate:g} Hz, "
+                f"top {self.top}, selected {chosen} ({self.selection}))")
 
     def unit(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """(frequencies in Hz, powers) of one unit, NaN entries dropped, strongest first."""
@@ -99,11 +105,18 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
 
     Returns:
         ``(starts_s, frequencies_hz, powers, band_levels_db)`` as described in :class:`Analysis`.
+
+    Raises:
+        ParameterError: a bad ``rate``, ``unit_ms`` or ``top``.
+        RealPenError: units shorter than 8 samples at this rate (naming ``source``).
     """
+    require_number("rate", rate, minimum=0.0, inclusive=False)
+    require_number("unit_ms", unit_ms, minimum=0.0, inclusive=False)
+    require_number("top", top, minimum=1)
     unit_samples = int(round(unit_ms * rate / 1000.0))
     if unit_samples < 8:
-        raise RealPenError(f"{source}: {unit_ms:g} ms units are only {unit_samples} samples at "
-                           f"{rate:g} Hz; record faster or use longer units (--unit-ms)")
+        raise fail(source, f"{unit_ms:g} ms units are only {unit_samples} samples at {rate:g} Hz; "
+                           f"record faster or use longer units (unit_ms)")
     count = len(x) // unit_samples
     nyquist = rate / 2
     fmax = nyquist if fmax is None else min(fmax, nyquist)
@@ -175,28 +188,34 @@ def _top_peaks(power: np.ndarray, in_band: np.ndarray, half_width: int, top: int
     return frequencies, powers
 
 
-def select_units(band_levels_db: np.ndarray, count: int, method: str = "stationary") -> np.ndarray:
+def select_units(band_levels_db: np.ndarray, count: int, selection: str = "stationary"
+                 ) -> np.ndarray:
     """Choose ``count`` consecutive units, never the first or the last.
 
     ``"stationary"`` takes the run whose band levels vary least around the run's own mean
     (sum over bands of the variance across units, in dB²); ``"middle"`` takes the run centred
     in the recording, as the method describes.
 
+    Args:
+        band_levels_db: band levels per unit in dB, shape (units, bands) (see :class:`Analysis`).
+        count: consecutive units to choose.
+        selection: ``"stationary"`` or ``"middle"``.
+
     Returns:
         The unit indices, ascending.
 
     Raises:
-        RealPenError: fewer than ``count + 2`` units, or an unknown method.
+        ParameterError: an unknown ``selection`` or a ``count`` below 1.
+        RealPenError: fewer than ``count + 2`` units.
     """
-    if method not in SELECTIONS:
-        raise RealPenError(f"--select: unknown selection '{method}' "
-                           f"(choose from {', '.join(SELECTIONS)})")
+    require_choice("selection", selection, SELECTIONS)
+    require_number("count", count, minimum=1)
     total = band_levels_db.shape[0]
     usable = total - 2
     if usable < count:
         raise RealPenError(f"too short: {total} units, but {count} consecutive units plus the "
                            f"dropped first and last need {count + 2}")
-    if method == "middle":
+    if selection == "middle":
         first = 1 + (usable - count) // 2
         return np.arange(first, first + count)
     inner = band_levels_db[1:-1]
@@ -215,7 +234,7 @@ def analyze(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10, c
             progress: ProgressCallback | None = None) -> Analysis:
     """Principal frequencies of every unit, and the ``count`` consecutive units to use.
 
-    ``x`` should already be one axis and high-passed (see :func:`realpen.recording.prepare`).
+    ``x`` should already be one axis and high-passed (see :func:`realpen.dsp.filters.prepare`).
 
     Args:
         x: signal, shape (frames,), in the recording's unit.
@@ -230,15 +249,23 @@ def analyze(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10, c
         progress: called as ``progress(units_done, units_total)``.
 
     Raises:
+        ParameterError: a bad ``rate``, ``unit_ms``, ``top``, ``count`` or ``selection``
+            (worded with these names, e.g. ``"unit_ms: must be > 0, got -1"``).
         RealPenError: a silent or constant signal (no peaks), or a signal too short for
             ``count + 2`` units.
+
+    Example:
+        >>> import numpy as np
+        >>> t = np.arange(3 * 1344) / 1344
+        >>> result = analyze(np.sin(2 * np.pi * 200 * t), 1344, top=1)
+        >>> round(float(result.unit(5)[0][0]))
+        200
     """
-    require_number("--unit-ms", unit_ms, minimum=0.0, inclusive=False)
-    require_number("--top", top, minimum=1)
-    require_number("--subpatterns", count, minimum=1)
-    if selection not in SELECTIONS:
-        raise RealPenError(f"--select: unknown selection '{selection}' "
-                           f"(choose from {', '.join(SELECTIONS)})")
+    require_number("rate", rate, minimum=0.0, inclusive=False)
+    require_number("unit_ms", unit_ms, minimum=0.0, inclusive=False)
+    require_number("top", top, minimum=1)
+    require_number("count", count, minimum=1)
+    require_choice("selection", selection, SELECTIONS)
     if not np.any(np.abs(x) > 1e-12 * max(1.0, float(np.max(np.abs(x), initial=0.0)))):
         raise RealPenError(f"{source}: signal is silent or constant (no spectral peaks)")
     unit_samples = int(round(unit_ms * rate / 1000.0))

@@ -1,13 +1,26 @@
-"""Exports of a pen profile to the formats haptic platforms read, one module per format.
+"""Exports of a tactile pattern (and its sound loop) to the formats haptic platforms read.
+
+Every format takes a :class:`~realpen.tactile.pattern.TactilePattern`, optionally a sound loop
+(:class:`realpen.sound.loop.SoundLoop`, or any object with ``samples`` and ``rate``) and the
+coupling constants, so a pattern made in a notebook exports as well as a pen profile::
+
+    from realpen.exports import render, export
+    result = render("hjif", pattern)                       # bytes, summary, limits
+    export("ahap", "pen.ahap", pattern, sound=loop)        # writes pen.ahap + pen-sound.wav
+    export_profile(resolve_profile("pencil"), "wav", "pencil.wav", stereo=True)
 
 :data:`FORMATS` maps a format name to its module. Each module documents its fields, where they
 come from, and what the format cannot carry, and defines ``SUFFIX``, ``LIMITS`` and
-``export(profile, **options) -> Export``; a module may define ``path_options(path)`` for
-options that follow from the output path. :func:`export_profile` renders and writes atomically.
+``export(pattern, sound=None, coupling=None, *, name, tool, version, **options) -> Export``.
+Formats that need the sound (``wav`` with ``stereo=True``; ``ahap`` with
+``sound_events=True``) refuse to go without it, naming ``sound``.
 
 Looping: the tactile pattern (1500 ms) loops while the pen moves. WAV, C header and Android's
 ``createWaveform`` carry the loop; AHAP, ``.haptic``, ``.hjif`` and the Android envelopes have
 no loop flag, so they hold one period (or ``repeats`` periods) and loop at playback.
+
+May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.tactile`,
+:mod:`realpen.profile` (for :func:`export_profile`).
 """
 
 from __future__ import annotations
@@ -18,11 +31,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
 
-from realpen.errors import RealPenError, fail
-from realpen.io.files import atomic_path
-from realpen.profile.bundle import PenProfile
+from realpen.errors import ParameterError, fail
 from realpen.exports import ahap, android, c_header, haptic, hjif, wav
 from realpen.exports.base import Export
+from realpen.io.files import atomic_path
+
+__all__ = ["FORMATS", "Export", "Written", "format_names", "profile_inputs", "companion_paths",
+           "render", "export", "render_profile", "export_profile"]
 
 FORMATS: dict[str, ModuleType] = {
     "wav": wav,
@@ -32,6 +47,7 @@ FORMATS: dict[str, ModuleType] = {
     "android": android,
     "hjif": hjif,
 }
+_INPUTS = ("pattern", "sound", "coupling", "name", "tool", "version")
 
 
 def _ahap_path_options(path: Path) -> dict:
@@ -47,7 +63,7 @@ _PATH_OPTIONS = {"ahap": _ahap_path_options, "android": _android_path_options}
 
 @dataclass
 class Written:
-    """What :func:`export_profile` wrote: the main file, any companions, and the export."""
+    """What :func:`export` wrote: the main file, any companions, and the export."""
 
     path: Path
     companions: list[Path]
@@ -59,50 +75,103 @@ def format_names() -> str:
     return ", ".join(FORMATS)
 
 
-def render(profile: PenProfile, fmt: str, **options) -> Export:
-    """Render ``profile`` in format ``fmt`` without writing anything.
+def profile_inputs(profile) -> dict:
+    """The export inputs of a pen profile: ``pattern``, ``sound`` (its loop), ``coupling``,
+    ``name``, ``tool`` and ``version`` (the profile's content version)."""
+    return {"pattern": profile.pattern, "sound": profile.sound_loop,
+            "coupling": profile.coupling, "name": profile.name, "tool": profile.meta.tool,
+            "version": profile.version}
 
-    Options the format does not take are refused (``None`` means "not given").
+
+def companion_paths(fmt: str, out_path: str | os.PathLike) -> list[Path]:
+    """The files :func:`export` writes beside ``out_path`` for a pen profile (which has a
+    sound): for ``ahap`` the sound it plays, ``<stem>-sound.wav``; none for the others.
 
     Raises:
-        RealPenError: an unknown format or an option the format does not take, named as the
-            command line names it (``--stereo``), or a problem found while rendering.
+        ParameterError: an unknown ``fmt``.
     """
+    _module(fmt)
+    out = Path(out_path)
+    if fmt == "ahap":
+        return [out.with_name(_ahap_path_options(out)["sound_file"])]
+    return []
+
+
+def _module(fmt: str) -> ModuleType:
     module = FORMATS.get(fmt)
     if module is None:
-        raise RealPenError(f"--format: unknown format '{fmt}' (known: {format_names()})")
-    accepted = inspect.signature(module.export).parameters
-    given = {name: value for name, value in options.items() if value is not None}
-    for name, value in given.items():
-        if name not in accepted:
-            raise RealPenError(f"--{name.replace('_', '-')}: not used by --format {fmt}")
-    return module.export(profile, **given)
+        raise ParameterError("fmt", f"unknown format '{fmt}' (known: {format_names()})")
+    return module
 
 
-def export_profile(profile: PenProfile, fmt: str, out_path: str | os.PathLike,
-                   **options) -> Written:
-    """Export ``profile`` in format ``fmt`` to ``out_path``, atomically.
-
-    Companion files (e.g. the sound an AHAP plays) are written beside ``out_path``. Nothing is
-    written unless rendering succeeds; each file appears whole or not at all.
+def render(fmt: str, pattern, sound=None, coupling=None, **options) -> Export:
+    """Render a tactile pattern (and its sound loop) in format ``fmt`` without writing.
 
     Args:
-        profile: a loaded profile (see :func:`realpen.profile.resolve_profile`).
-        fmt: one of :data:`FORMATS`.
-        out_path: the file to write.
-        options: format options, e.g. ``stereo=True``, ``rate=44100``, ``repeats=2``.
+        fmt: one of :data:`FORMATS` (``wav``, ``c-header``, ``ahap``, ``haptic``, ``android``,
+            ``hjif``).
+        pattern: a :class:`~realpen.tactile.pattern.TactilePattern`, or a
+            :class:`~realpen.profile.bundle.PenProfile` (which brings its sound loop, coupling,
+            name, tool and version; ``sound``/``coupling`` given here take precedence).
+        sound: the sound loop (``samples``, ``rate`` in Hz); ``wav`` with ``stereo=True`` and
+            the ``ahap`` sound events need it.
+        coupling: the Eq. 1 constants (:class:`realpen.sound.coupling.Coupling`); the Android
+            JSON copies them, the other formats cannot carry them.
+        options: ``name``, ``tool``, ``version`` (labels; default ``"pattern"``, none, the
+            pattern's version) and the format's own options, e.g. ``stereo=True``,
+            ``rate=44100`` (Hz), ``repeats=2``. ``None`` means "not given".
+
+    Returns:
+        The :class:`~realpen.exports.base.Export`: bytes, summary, companion files, limits.
 
     Raises:
-        RealPenError: unknown format, unsupported option, bad option value, or an output path
-            that cannot be written — one line each.
+        ParameterError: an unknown ``fmt``, an option the format does not take (named by the
+            option), a bad option value, or a missing sound where it is needed.
+        RealPenError: a problem found while rendering (e.g. a silent pattern).
+
+    Example:
+        >>> from realpen.tactile.pattern import Component, TactilePattern
+        >>> pattern = TactilePattern([[Component(175.0, 0.5)], [Component(200.0, 0.5)]])
+        >>> render("c-header", pattern, name="demo").summary
+        'realpen_demo_tactile[1600], 12-bit codes 708–3356 at 8000 Hz, loop'
+    """
+    module = _module(fmt)
+    given = {name: value for name, value in options.items() if value is not None}
+    if not hasattr(pattern, "subpatterns") and hasattr(pattern, "pattern") \
+            and hasattr(pattern, "sound_loop"):  # a PenProfile
+        inputs = profile_inputs(pattern)
+        pattern = inputs.pop("pattern")
+        own_sound, own_coupling = inputs.pop("sound"), inputs.pop("coupling")
+        sound = own_sound if sound is None else sound
+        coupling = own_coupling if coupling is None else coupling
+        given = {**inputs, **given}
+    accepted = inspect.signature(module.export).parameters
+    for name in given:
+        if name not in accepted or name in ("pattern", "sound", "coupling"):
+            raise ParameterError(name, f"not used by format '{fmt}'")
+    return module.export(pattern, sound, coupling, **given)
+
+
+def export(fmt: str, out_path: str | os.PathLike, pattern, sound=None, coupling=None,
+           **options) -> Written:
+    """Render (see :func:`render`) and write ``out_path`` atomically.
+
+    Companion files (e.g. the sound an AHAP plays, ``<stem>-sound.wav``) are written beside
+    ``out_path``. Nothing is written unless rendering succeeds; each file appears whole or not
+    at all. For ``android``, a ``.kt`` path writes the Kotlin source alone.
+
+    Raises:
+        ParameterError: as :func:`render`.
+        RealPenError: an output path that cannot be written, naming it.
     """
     out = Path(out_path)
     if out.is_dir():
         raise fail(out, "is a folder; give the file to write")
     if fmt in _PATH_OPTIONS:
         for name, value in _PATH_OPTIONS[fmt](out).items():
-            options.setdefault(name, value)
-    result = render(profile, fmt, **options)
+            if options.get(name) is None:
+                options[name] = value
+    result = render(fmt, pattern, sound, coupling, **options)
     companions = [out.with_name(name) for name in result.companions]
     try:
         with atomic_path(out) as tmp:
@@ -113,3 +182,20 @@ def export_profile(profile: PenProfile, fmt: str, out_path: str | os.PathLike,
     except OSError as error:
         raise fail(out, f"cannot write ({error.strerror or error})") from None
     return Written(out, companions, result)
+
+
+def render_profile(profile, fmt: str, **options) -> Export:
+    """:func:`render` a pen profile (its pattern, sound loop, coupling, name and version)."""
+    return render(fmt, profile, **options)
+
+
+def export_profile(profile, fmt: str, out_path: str | os.PathLike, **options) -> Written:
+    """Export a pen profile in format ``fmt`` to ``out_path`` (see :func:`export`).
+
+    Args:
+        profile: a loaded profile (see :func:`realpen.profile.registry.resolve_profile`).
+        fmt: one of :data:`FORMATS`.
+        out_path: the file to write.
+        options: format options, e.g. ``stereo=True``, ``rate=44100`` (Hz), ``repeats=2``.
+    """
+    return export(fmt, out_path, profile, **options)

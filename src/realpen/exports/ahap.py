@@ -11,7 +11,8 @@ key reference):
   ``HapticSharpnessControl`` following its spectral centroid mapped log-wise from 30–500 Hz to
   0–1 (Core Haptics adds it to the event's sharpness 0);
 - ``AudioCustom`` events playing the friction-sound unit (``EventWaveformPath``, a 16-bit WAV
-  written beside the AHAP) back to back, one per unit length.
+  written beside the AHAP) back to back, one per unit length — when a sound loop is given
+  (``sound_events=True`` asks for them and refuses to go without the sound).
 
 Control-point times are relative to their curve's ``Time`` (Apple: "relative to the start
 time of the parameter curve"; Lofelt's converter wrote absolute times, correct only for its
@@ -36,12 +37,13 @@ import json
 import math
 
 import numpy as np
-import soundfile as sf
 
-from realpen import __version__
-from realpen.profile.bundle import PenProfile
+from realpen.errors import ParameterError
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_repeats
+from realpen.exports.base import Export, check_pattern, check_repeats, realpen_version, sound_samples
+from realpen.tactile.pattern import TactilePattern
+
+__all__ = ["SUFFIX", "MAX_CURVE_POINTS", "MAX_EVENT_S", "LIMITS", "build", "sound_wav", "export"]
 
 SUFFIX = ".ahap"
 MAX_CURVE_POINTS = 16
@@ -52,6 +54,7 @@ LIMITS = (
     "sound units are separate AudioCustom events: the seams are only as exact as the "
     "engine's scheduling",
 )
+NO_SOUND = "no sound was given: the AHAP holds no AudioCustom events"
 
 
 def _curves(parameter: str, times: np.ndarray, values: np.ndarray) -> list[dict]:
@@ -90,58 +93,88 @@ def _sounds(unit_s: float, total_s: float, path: str) -> list[dict]:
             for index in range(count)]
 
 
-def build(profile: PenProfile, repeats: int = 1, sound: bool = True,
-          sound_file: str | None = None, created: str | None = None) -> dict:
-    """The AHAP document of a profile, as a dict ready for ``json.dumps``.
+def _wants_sound(sound, sound_events: bool | None) -> bool:
+    if sound_events and sound is None:
+        raise ParameterError("sound", "AHAP sound events (AudioCustom) need the sound: give a "
+                                      "sound loop (sound=...), or sound_events=False")
+    return sound is not None if sound_events is None else bool(sound_events)
+
+
+def build(pattern: TactilePattern, sound=None, *, repeats: int = 1,
+          sound_events: bool | None = None, sound_file: str | None = None,
+          created: str | None = None, name: str = "pattern", tool: str = "",
+          version: str | None = None) -> dict:
+    """The AHAP document, as a dict ready for ``json.dumps``.
 
     Args:
+        pattern: the tactile pattern.
+        sound: the sound loop (``samples``, ``rate`` in Hz), played as ``AudioCustom`` events.
         repeats: periods of the tactile pattern laid end to end.
-        sound: add the friction sound as ``AudioCustom`` events.
+        sound_events: add the sound as ``AudioCustom`` events (None: when ``sound`` is given;
+            True without a sound is refused).
         sound_file: the ``EventWaveformPath`` (default ``<name>-sound.wav``).
         created: the ``Metadata.Created`` date (default: today, ISO 8601).
+        name, tool, version: for ``Metadata`` (version default: the pattern's).
+
+    Raises:
+        ParameterError: ``sound_events=True`` without a sound, or a bad ``repeats``.
     """
+    pattern = check_pattern(pattern)
     repeats = check_repeats(repeats)
-    measured = env.measure(profile.tactile, profile.meta.tactile.rate, source=profile.name)
+    with_sound = _wants_sound(sound, sound_events)
+    measured = env.measure(pattern.samples, pattern.rate, source=name)
     times, intensity = env.loop_curve(measured, measured.intensity, repeats)
     _, sharp = env.loop_curve(measured, env.sharpness(measured.centroid_hz), repeats)
     total = measured.period_s * repeats
-    pattern = _continuous(total)
-    pattern += _curves("HapticIntensityControl", times, intensity)
-    pattern += _curves("HapticSharpnessControl", times, sharp)
-    if sound:
-        unit = len(profile.sound) / profile.meta.sound.rate
-        pattern += _sounds(unit, total, sound_file or f"{profile.name}-sound.wav")
-    pattern.sort(key=lambda entry: next(iter(entry.values()))["Time"])
+    entries = _continuous(total)
+    entries += _curves("HapticIntensityControl", times, intensity)
+    entries += _curves("HapticSharpnessControl", times, sharp)
+    if with_sound:
+        loop, rate = sound_samples(sound, "AHAP sound events")
+        entries += _sounds(len(loop) / rate, total, sound_file or f"{name}-sound.wav")
+    entries.sort(key=lambda entry: next(iter(entry.values()))["Time"])
+    what = f"{tool}: " if tool else ""
     return {
         "Version": 1.0,
-        "Metadata": {"Project": f"RealPen {profile.name}",
+        "Metadata": {"Project": f"RealPen {name}",
                      "Created": created or _dt.date.today().isoformat(),
-                     "Description": f"{profile.meta.tool}: {total * 1000:g} ms "
+                     "Description": f"{what}{total * 1000:g} ms "
                                     f"({repeats} × {measured.period_s * 1000:g} ms), RealPen "
-                                    f"{__version__}, profile version {profile.version}"},
-        "Pattern": pattern,
+                                    f"{realpen_version()}, version {version or pattern.version}"},
+        "Pattern": entries,
     }
 
 
-def sound_wav(profile: PenProfile) -> bytes:
-    """The sound unit as a 16-bit PCM WAV at its own rate (a format every audio API reads)."""
+def sound_wav(sound) -> bytes:
+    """The sound loop as a 16-bit PCM WAV at its own rate (a format every audio API reads)."""
+    import soundfile as sf
+
+    loop, rate = sound_samples(sound, "the AHAP's sound file")
     buffer = io.BytesIO()
-    sf.write(buffer, np.clip(profile.sound, -1.0, 1.0), profile.meta.sound.rate,
-             subtype="PCM_16", format="WAV")
+    sf.write(buffer, np.clip(loop, -1.0, 1.0), rate, subtype="PCM_16", format="WAV")
     return buffer.getvalue()
 
 
-def export(profile: PenProfile, repeats: int = 1, sound: bool = True,
-           sound_file: str | None = None) -> Export:
-    """Render the AHAP (and the sound WAV it refers to); see the module docstring."""
-    name = sound_file or f"{profile.name}-sound.wav"
-    document = build(profile, repeats, sound, name)
+def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "pattern",
+           tool: str = "", version: str | None = None, repeats: int = 1,
+           sound_events: bool | None = None, sound_file: str | None = None,
+           created: str | None = None) -> Export:
+    """Render the AHAP (and the sound WAV it refers to); see the module docstring and
+    :func:`build` for the options.
+
+    ``coupling`` is not carried (the app applies Eq. 1 with dynamic parameters).
+    """
+    file_name = sound_file or f"{name}-sound.wav"
+    document = build(pattern, sound, repeats=repeats, sound_events=sound_events,
+                     sound_file=file_name, created=created, name=name, tool=tool,
+                     version=version)
     curves = sum("ParameterCurve" in entry for entry in document["Pattern"])
     audio = sum(entry.get("Event", {}).get("EventType") == "AudioCustom"
                 for entry in document["Pattern"])
     total = sum(entry["Event"]["EventDuration"] for entry in document["Pattern"]
                 if entry.get("Event", {}).get("EventType") == "HapticContinuous")
     summary = (f"{total * 1000:g} ms continuous event, {curves} parameter curves"
-               + (f", {audio} AudioCustom events playing {name}" if sound else ""))
+               + (f", {audio} AudioCustom events playing {file_name}" if audio else ""))
+    limits = LIMITS if audio else (*LIMITS[:2], NO_SOUND)
     return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
-                  summary, {name: sound_wav(profile)} if sound else {}, LIMITS)
+                  summary, {file_name: sound_wav(sound)} if audio else {}, limits)

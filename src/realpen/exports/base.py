@@ -1,13 +1,17 @@
-"""What every export returns, and the checks of the options they share."""
+"""What every export returns, and the pieces the formats share: option checks, the sound
+loop's samples, loop-preserving resampling."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import resample_poly
 
-from realpen.errors import RealPenError
+from realpen.errors import ParameterError
+from realpen.tactile.pattern import TactilePattern
+
+__all__ = ["Export", "MAX_REPEATS", "check_repeats", "check_pattern", "sound_samples",
+           "resample_loop", "realpen_version", "title"]
 
 MAX_REPEATS = 100  # 150 s of a 1.5 s pattern; players loop, files need not
 
@@ -29,13 +33,76 @@ class Export:
     companions: dict[str, bytes] = field(default_factory=dict)
     limits: tuple[str, ...] = ()
 
+    def __repr__(self) -> str:
+        extra = f", companions {sorted(self.companions)}" if self.companions else ""
+        return f"Export({len(self.data)} bytes{extra}: {self.summary[:120]})"
+
+
+def realpen_version() -> str:
+    """The package version, for the files' metadata."""
+    from realpen import __version__
+
+    return __version__
+
+
+def title(name: str, tool: str = "") -> str:
+    """``"name (tool)"``, or the name alone when there is no tool."""
+    return f"{name} ({tool})" if tool else name
+
+
+def check_pattern(pattern: object) -> TactilePattern:
+    """``pattern`` if it is a :class:`~realpen.tactile.pattern.TactilePattern`.
+
+    Raises:
+        ParameterError: (parameter ``pattern``) otherwise.
+    """
+    if not isinstance(pattern, TactilePattern):
+        raise ParameterError("pattern", f"must be a TactilePattern (or a PenProfile for "
+                                        f"realpen.exports.render), got {type(pattern).__name__}")
+    return pattern
+
 
 def check_repeats(repeats: int) -> int:
-    """``repeats`` as an int in 1 … :data:`MAX_REPEATS`; else a one-line error naming it."""
-    if int(repeats) != repeats or not 1 <= repeats <= MAX_REPEATS:
-        raise RealPenError(f"--repeats: must be a whole number from 1 to {MAX_REPEATS}, "
-                           f"got {repeats}")
+    """``repeats`` as an int in 1 … :data:`MAX_REPEATS`.
+
+    Raises:
+        ParameterError: (parameter ``repeats``) otherwise.
+    """
+    if isinstance(repeats, bool) or not isinstance(repeats, (int, float, np.integer)) \
+            or int(repeats) != repeats or not 1 <= repeats <= MAX_REPEATS:
+        raise ParameterError("repeats", f"must be a whole number from 1 to {MAX_REPEATS}, "
+                                        f"got {repeats}")
     return int(repeats)
+
+
+def sound_samples(sound: object, needed_for: str) -> tuple[np.ndarray, int]:
+    """The samples (float64, mono) and rate (Hz) of a sound loop.
+
+    Args:
+        sound: a :class:`realpen.sound.loop.SoundLoop` or any object with ``samples`` (one
+            loop, full scale ±1) and ``rate`` (Hz); ``is_loop``, when present, must be true.
+        needed_for: what needs the sound, for the message when it is missing.
+
+    Raises:
+        ParameterError: (parameter ``sound``) no sound, not a loop, or not mono samples.
+    """
+    if sound is None:
+        raise ParameterError("sound", f"{needed_for} needs the sound: give a sound loop "
+                                      f"(sound=..., an object with samples and rate)")
+    if not (hasattr(sound, "samples") and hasattr(sound, "rate")):
+        raise ParameterError("sound", f"must have samples and rate (a SoundLoop), got "
+                                      f"{type(sound).__name__}")
+    if getattr(sound, "is_loop", True) is False:
+        raise ParameterError("sound", "is not a loop (make one with realpen.sound.loop first)")
+    samples = np.asarray(sound.samples, dtype=np.float64)
+    if samples.ndim == 2 and samples.shape[1] == 1:
+        samples = samples[:, 0]
+    if samples.ndim != 1 or not len(samples):
+        raise ParameterError("sound", f"must be mono samples, got shape {samples.shape}")
+    rate = float(sound.rate)
+    if rate <= 0 or int(rate) != rate:
+        raise ParameterError("sound", f"rate must be a positive whole number of Hz, got {rate:g}")
+    return samples, int(rate)
 
 
 def resample_loop(x: np.ndarray, rate: int, new_rate: int, what: str = "pattern") -> np.ndarray:
@@ -50,20 +117,24 @@ def resample_loop(x: np.ndarray, rate: int, new_rate: int, what: str = "pattern"
         what: how to name the signal in an error.
 
     Raises:
-        RealPenError: ``new_rate`` is not positive, or the period is not a whole number of
-            samples at ``new_rate`` (the loop would drift by a fraction of a sample each time).
+        ParameterError: (parameter ``rate``) ``new_rate`` is not positive, or the period is not
+            a whole number of samples at ``new_rate`` (the loop would drift by a fraction of a
+            sample each time).
     """
-    if int(new_rate) != new_rate or new_rate <= 0:
-        raise RealPenError(f"--rate: must be a positive whole number of Hz, got {new_rate}")
+    from scipy.signal import resample_poly
+
+    if isinstance(new_rate, bool) or int(new_rate) != new_rate or new_rate <= 0:
+        raise ParameterError("rate", f"must be a positive whole number of Hz, got {new_rate}")
     new_rate = int(new_rate)
     if new_rate == rate:
         return np.asarray(x)
     x = np.asarray(x, dtype=np.float64)
     frames = len(x) * new_rate / rate
     if abs(frames - round(frames)) > 1e-9:
-        raise RealPenError(f"--rate: the {what} ({len(x)} samples at {rate} Hz) is not a whole "
-                           f"number of samples at {new_rate} Hz; choose a rate that makes "
-                           f"{len(x) / rate * 1000:g} ms a whole number of samples")
+        raise ParameterError("rate", f"the {what} ({len(x)} samples at {rate} Hz) is not a whole "
+                                     f"number of samples at {new_rate} Hz; choose a rate that "
+                                     f"makes {len(x) / rate * 1000:g} ms a whole number of "
+                                     f"samples")
     gcd = np.gcd(int(rate), new_rate)
     tripled = np.concatenate([x, x, x])
     out = resample_poly(tripled, new_rate // gcd, int(rate) // gcd, axis=0)

@@ -19,6 +19,9 @@ import numpy as np
 
 from realpen.errors import fail
 
+__all__ = ["FRAME_MS", "WINDOW_MS", "SHARPNESS_RANGE_HZ", "Envelope", "measure", "sharpness",
+           "sharpness_to_hz", "loop_curve"]
+
 FRAME_MS = 10.0  # short enough for the beating between components, long enough to average
 WINDOW_MS = 40.0  # centroid window: 25 Hz resolution before zero padding
 SHARPNESS_RANGE_HZ = (30.0, 500.0)  # high-pass of the method … upper edge of touch
@@ -53,7 +56,7 @@ class Envelope:
         """Frame RMS relative to the loudest frame, 0 … 1."""
         return self.rms / float(self.rms.max())
 
-    def segments(self, count: int) -> "Envelope":
+    def segments(self, count: int) -> Envelope:
         """The envelope averaged over ``count`` equal segments of the period.
 
         RMS is averaged as power; the centroid is weighted by frame power. Used where a
@@ -87,9 +90,11 @@ def measure(samples: np.ndarray, rate: float, frame_ms: float = FRAME_MS,
         RealPenError: the pattern is silent (nothing to follow) or shorter than a frame.
 
     Example:
-        >>> env = measure(profile.tactile, profile.meta.tactile.rate)
-        >>> env.intensity.max()
-        1.0
+        >>> import numpy as np
+        >>> t = np.arange(12000) / 8000
+        >>> env = measure(np.sin(2 * np.pi * 200 * t) * (1 + t), 8000)
+        >>> float(env.intensity.max()), round(float(np.median(env.centroid_hz)))
+        (1.0, 200)
     """
     x = np.asarray(samples, dtype=np.float64)
     n = len(x)

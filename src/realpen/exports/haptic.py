@@ -22,10 +22,11 @@ from __future__ import annotations
 
 import json
 
-from realpen import __version__
-from realpen.profile.bundle import PenProfile
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_repeats
+from realpen.exports.base import Export, check_pattern, check_repeats, realpen_version
+from realpen.tactile.pattern import TactilePattern
+
+__all__ = ["SUFFIX", "LIMITS", "build", "export"]
 
 SUFFIX = ".haptic"
 LIMITS = (
@@ -35,26 +36,30 @@ LIMITS = (
 )
 
 
-def build(profile: PenProfile, repeats: int = 1) -> dict:
-    """The ``.haptic`` document of a profile, as a dict ready for ``json.dumps``.
+def build(pattern: TactilePattern, *, repeats: int = 1, name: str = "pattern", tool: str = "",
+          version: str | None = None) -> dict:
+    """The ``.haptic`` document, as a dict ready for ``json.dumps``.
 
     Args:
+        pattern: the tactile pattern.
         repeats: periods of the tactile pattern laid end to end.
+        name, tool, version: for ``metadata`` (version default: the pattern's).
     """
+    pattern = check_pattern(pattern)
     repeats = check_repeats(repeats)
-    measured = env.measure(profile.tactile, profile.meta.tactile.rate, source=profile.name)
+    measured = env.measure(pattern.samples, pattern.rate, source=name)
     times, intensity = env.loop_curve(measured, measured.intensity, repeats)
     _, sharp = env.loop_curve(measured, env.sharpness(measured.centroid_hz), repeats)
+    what = f"{tool}: " if tool else ""
     return {
         "version": {"major": 1, "minor": 0, "patch": 0},
         "metadata": {
-            "editor": f"RealPen {__version__}",
+            "editor": f"RealPen {realpen_version()}",
             "author": "",
-            "source": f"{profile.name} (profile version {profile.version})",
+            "source": f"{name} (version {version or pattern.version})",
             "project": "RealPen",
-            "tags": ["RealPen", profile.name],
-            "description": f"{profile.meta.tool}: {repeats} × "
-                           f"{measured.period_s * 1000:g} ms tactile pattern",
+            "tags": ["RealPen", name],
+            "description": f"{what}{repeats} × {measured.period_s * 1000:g} ms tactile pattern",
         },
         "signals": {"continuous": {"envelopes": {
             "amplitude": [{"time": round(float(t), 6), "amplitude": round(float(a) ** 2, 4)}
@@ -65,9 +70,11 @@ def build(profile: PenProfile, repeats: int = 1) -> dict:
     }
 
 
-def export(profile: PenProfile, repeats: int = 1) -> Export:
-    """Render the ``.haptic`` file of a profile; see the module docstring."""
-    document = build(profile, repeats)
+def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "pattern",
+           tool: str = "", version: str | None = None, repeats: int = 1) -> Export:
+    """Render the ``.haptic`` file; see the module docstring. ``sound`` and ``coupling`` are
+    not carried."""
+    document = build(pattern, repeats=repeats, name=name, tool=tool, version=version)
     points = document["signals"]["continuous"]["envelopes"]["amplitude"]
     return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
                   f"{len(points)} amplitude and frequency breakpoints over "

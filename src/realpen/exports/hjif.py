@@ -52,9 +52,11 @@ import json
 
 import numpy as np
 
-from realpen import __version__
-from realpen.profile.bundle import ComponentEntry, PenProfile
-from realpen.exports.base import Export, check_repeats
+from realpen.exports.base import Export, check_pattern, check_repeats, realpen_version, title
+from realpen.tactile.pattern import Component, TactilePattern
+from realpen.tactile.synthesis import fade_samples, subpattern_samples
+
+__all__ = ["SUFFIX", "MAX_TIMESCALE", "MAX_DRIFT_RAD", "LIMITS", "effects", "build", "export"]
 
 SUFFIX = ".hjif"
 MAX_TIMESCALE = 48000
@@ -67,7 +69,7 @@ LIMITS = (
 )
 
 
-def _ramps(start: int, length: int, fade: int, component: ComponentEntry
+def _ramps(start: int, length: int, fade: int, component: Component
            ) -> tuple[np.ndarray, np.ndarray]:
     """Sample times and levels of one component's envelope: fade in, hold, fade out.
 
@@ -84,7 +86,7 @@ def _ramps(start: int, length: int, fade: int, component: ComponentEntry
     return times, amplitude * np.concatenate([rise, fall])
 
 
-def _effect(start: int, length: int, fade: int, component: ComponentEntry, first: int,
+def _effect(start: int, length: int, fade: int, component: Component, first: int,
             stop: int, rate: int, timescale: int) -> dict:
     """The sine effect of one component of the sub-pattern starting at sample ``start``,
     covering samples ``first`` … ``stop - 1``.
@@ -109,20 +111,18 @@ def _effect(start: int, length: int, fade: int, component: ComponentEntry, first
                            "frequency_modulation": frequency} for k, a in zip(ticks, v)]}
 
 
-def effects(profile: PenProfile, repeats: int = 1) -> tuple[list[dict], int]:
+def effects(pattern: TactilePattern, repeats: int = 1) -> tuple[list[dict], int]:
     """All sine effects of ``repeats`` periods, sorted by position, and the timescale (ticks/s).
 
     A component whose whole-Hz frequency would drift more than :data:`MAX_DRIFT_RAD` from its
     true phase at either end of its span is split into equal pieces, each with its own phase.
     """
-    tactile = profile.meta.tactile
+    tactile = check_pattern(pattern)
     rate = tactile.rate
     timescale = min(rate, MAX_TIMESCALE)
-    length = int(round(tactile.subpattern_ms * rate / 1000.0))
-    fade = 0
-    if tactile.boundary == "crossfade":
-        fade = int(round(tactile.crossfade_ms * rate / 1000.0))
-    fade = min(fade - fade % 2, length)  # as the synthesis: even, centred on the boundary
+    length = subpattern_samples(rate, tactile.subpattern_ms)
+    # As the synthesis: even, centred on the boundary, at most one sub-pattern.
+    fade = fade_samples(rate, tactile.subpattern_ms, tactile.boundary, tactile.crossfade_ms)
     count = len(tactile.subpatterns)
     end = length * count * repeats
     found = []
@@ -139,41 +139,49 @@ def effects(profile: PenProfile, repeats: int = 1) -> tuple[list[dict], int]:
     return found, timescale
 
 
-def build(profile: PenProfile, repeats: int = 1, date: str | None = None) -> dict:
-    """The ``.hjif`` document of a profile, as a dict ready for ``json.dumps``.
+def build(pattern: TactilePattern, *, repeats: int = 1, date: str | None = None,
+          name: str = "pattern", tool: str = "", version: str | None = None) -> dict:
+    """The ``.hjif`` document, as a dict ready for ``json.dumps``.
 
     Args:
+        pattern: the tactile pattern (its actuator, when known, is the reference device).
         repeats: periods of the tactile pattern laid end to end.
         date: ISO 8601 date (default: today).
+        name, tool, version: for the descriptions (version default: the pattern's).
     """
+    pattern = check_pattern(pattern)
     repeats = check_repeats(repeats)
-    found, timescale = effects(profile, repeats)
+    found, timescale = effects(pattern, repeats)
     frequencies = [effect["keyframes"][0]["frequency_modulation"] for effect in found]
-    actuator = profile.meta.actuator
-    device = {"id": 0, "name": actuator.spec}
-    if "f0" in actuator.params:
+    actuator = pattern.actuator
+    device = {"id": 0, "name": actuator.spec if actuator is not None else "unspecified"}
+    if actuator is not None and "f0" in actuator.params:
         device["resonance_frequency"] = float(actuator.params["f0"])
     band = {"band_type": "VectorialWave",
             "lower_frequency_limit": int(min(frequencies)),
             "upper_frequency_limit": int(max(frequencies)),
             "effects": found}
-    channel = {"id": 0, "description": f"{profile.name} tactile pattern", "gain": 1.0,
+    channel = {"id": 0, "description": f"{name} tactile pattern", "gain": 1.0,
                "mixing_coefficient": 1.0, "body_part_mask": 0, "reference_device_id": 0,
                "bands": [band]}
     perception = {"id": 0, "avatar_id": 0,
-                  "description": f"{profile.meta.tool} on paper (RealPen {profile.name})",
+                  "description": f"{title(name, tool)}: RealPen tactile pattern",
                   "perception_modality": "Vibrotactile", "reference_devices": [device],
                   "effect_library": [], "channels": [channel]}
     return {"version": "2023", "profile": "Main", "level": 1,
             "date": date or _dt.date.today().isoformat(),
-            "description": f"RealPen {__version__}: {profile.name}, {repeats} period(s) of the "
-                           f"tactile pattern, profile version {profile.version}",
+            "description": f"RealPen {realpen_version()}: {name}, {repeats} period(s) of the "
+                           f"tactile pattern, version {version or pattern.version}",
             "timescale": timescale, "avatars": [], "perceptions": [perception], "syncs": []}
 
 
-def export(profile: PenProfile, repeats: int = 1) -> Export:
-    """Render the ``.hjif`` file of a profile; see the module docstring."""
-    document = build(profile, repeats)
+def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "pattern",
+           tool: str = "", version: str | None = None, repeats: int = 1,
+           date: str | None = None) -> Export:
+    """Render the ``.hjif`` file; see the module docstring and :func:`build` for the options.
+    ``sound`` and ``coupling`` are not carried."""
+    document = build(pattern, repeats=repeats, date=date, name=name, tool=tool,
+                     version=version)
     band = document["perceptions"][0]["channels"][0]["bands"][0]
     return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
                   f"{len(band['effects'])} sine effects, {band['lower_frequency_limit']}–"

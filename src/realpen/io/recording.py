@@ -7,24 +7,19 @@ header row, an optional time column) and NPZ.
 
 from __future__ import annotations
 
-import csv
-import io
 import os
 import re
 import struct
 import zipfile
 from dataclasses import dataclass, field, replace
-from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 import soundfile as sf
-from scipy import fft as sp_fft
-from scipy import signal
 from scipy.interpolate import CubicSpline
 
-from realpen.errors import RealPenError, fail, require_number
-from realpen.io.csvtable import is_number
+from realpen.errors import ParameterError, fail, require_number
+from realpen.io.csvtable import read_csv
 from realpen.io.files import atomic_path, check_readable_file, sha256_of
 
 TIME_COLUMNS = ("t", "time", "timestamp")
@@ -61,6 +56,13 @@ class Recording:
         if samples.ndim != 2 or samples.shape[1] != len(self.axes):
             raise ValueError(f"samples of shape {samples.shape} do not match axes {self.axes}")
 
+    def __repr__(self) -> str:
+        axes = ",".join(self.axes) if len(self.axes) <= 4 else f"{len(self.axes)} axes"
+        source = Path(self.source).name if self.source else "memory"
+        source = source if len(source) <= 60 else source[:57] + "..."
+        return (f"Recording({axes}, {self.samples.shape[0]} frames at {self.rate:g} Hz "
+                f"({self.duration:.3f} s), {self.units}, from {source})")
+
     @property
     def duration(self) -> float:
         """Length in seconds."""
@@ -73,7 +75,7 @@ class Recording:
             raise ValueError("recording has more than one axis; combine them first")
         return self.samples[:, 0]
 
-    def with_samples(self, samples: np.ndarray, step: str, **changes) -> "Recording":
+    def with_samples(self, samples: np.ndarray, step: str, **changes) -> Recording:
         """A copy with new samples and one more entry in ``history``."""
         return replace(self, samples=samples, history=self.history + (step,), **changes)
 
@@ -86,33 +88,33 @@ def _check_finite(samples: np.ndarray, source: str) -> None:
 
 
 def load_recording(path: str | os.PathLike, rate: float | None = None,
-                   units: str | None = None, rate_option: str = "--rate") -> Recording:
+                   units: str | None = None) -> Recording:
     """Load a vibration recording from WAV/FLAC/OGG, CSV or NPZ.
 
     Args:
         path: the file. The suffix picks the reader (``.csv``, ``.npz``; anything else is read
             as audio by soundfile).
-        rate: sampling rate in Hz for a CSV with no time column (ignored otherwise unless the
-            file carries no rate at all).
+        rate: sampling rate in Hz for a CSV with no time column or an NPZ with no ``rate``
+            (ignored when the file carries its own rate).
         units: override the unit of the samples.
-        rate_option: how the caller's command line names ``rate``, for messages.
 
     Returns:
         A :class:`Recording` with ``source`` and ``sha256`` set.
 
     Raises:
-        RealPenError: missing, empty, truncated or unreadable files, NaN/inf samples, a CSV
-            with no time column and no ``rate``.
+        RealPenError: missing, empty, truncated or unreadable files, NaN/inf samples.
+        ParameterError: ``rate`` is not a positive number, or is needed (a CSV with no time
+            column, an NPZ with no ``rate``) and not given.
     """
     path = Path(path)
     check_readable_file(path)
     if rate is not None:
-        require_number(rate_option, rate, minimum=0.0, inclusive=False)
+        require_number("rate", rate, minimum=0.0, inclusive=False)
     suffix = path.suffix.lower()
     if suffix == ".csv":
-        recording = _load_csv(path, rate, rate_option)
+        recording = _load_csv(path, rate)
     elif suffix == ".npz":
-        recording = _load_npz(path, rate, rate_option)
+        recording = _load_npz(path, rate)
     else:
         recording = _load_audio(path)
     if recording.samples.shape[0] == 0:
@@ -170,33 +172,12 @@ JITTER_TOLERANCE = 0.01  # steps within 1 % of the median count as even sampling
 GAP_FACTOR = 2.0  # a step this many times the median is a gap: samples are missing
 
 
-def _load_csv(path: Path, rate: float | None, rate_option: str = "--rate") -> Recording:
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise fail(path, "not a text CSV file") from None
-    lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
-             if line.strip()]
-    if len(lines) < 2:
-        raise fail(path, "CSV needs a header row and at least one row of values")
-    try:
-        dialect = csv.Sniffer().sniff("\n".join(line for _, line in lines[:20]),
-                                      delimiters=",;\t ")
-    except csv.Error:
-        dialect = csv.excel
-    rows = list(csv.reader(io.StringIO("\n".join(line for _, line in lines)), dialect))
-    header = [name.strip() for name in rows[0]]
-    if all(is_number(name) for name in header):
-        raise fail(path, "CSV needs a header row naming its columns (the first row is numbers)")
-    values = []
-    for (number, _), row in zip(lines[1:], rows[1:]):
-        if len(row) != len(header):
-            raise fail(path, f"line {number} has {len(row)} columns; the header has {len(header)}")
-        try:
-            values.append([float(cell) for cell in row])
-        except ValueError:
-            raise fail(path, f"line {number} has a value that is not a number") from None
-    values = np.array(values, dtype=np.float64)
+def _load_csv(path: Path, rate: float | None) -> Recording:
+    # The one CSV reader: a header row, a sniffed delimiter (a decimal comma with ';'), blank
+    # lines skipped, every value a finite number, messages naming the line.
+    table = read_csv(path)
+    header = list(table.names)
+    values = table.values
     time_index = next((i for i, name in enumerate(header) if TIME_PATTERN.match(name)), None)
     if time_index is not None:
         times = values[:, time_index]
@@ -204,8 +185,9 @@ def _load_csv(path: Path, rate: float | None, rate_option: str = "--rate") -> Re
         time_name = header.pop(time_index)
         rate, values = _even_sampling(path, time_name, times, values)
     elif rate is None:
-        raise fail(path, f"CSV has no time column (t, time or timestamp); give its sampling rate "
-                         f"with {rate_option}")
+        # A missing argument, not bad data: the caller names its own way of giving ``rate``.
+        raise ParameterError("rate", f"needed in Hz: {path} is a CSV with no time column "
+                                     f"(t, time or timestamp)")
     if values.shape[1] == 0:
         raise fail(path, "CSV has no signal columns")
     return Recording(values, float(rate), tuple(header))
@@ -233,7 +215,7 @@ def _even_sampling(path: Path, name: str, times: np.ndarray, values: np.ndarray
     return 1.0 / step, CubicSpline(times, values, axis=0)(grid)
 
 
-def _load_npz(path: Path, rate: float | None, rate_option: str = "--rate") -> Recording:
+def _load_npz(path: Path, rate: float | None) -> Recording:
     try:
         archive = np.load(path, allow_pickle=False)
         if not hasattr(archive, "files"):
@@ -259,7 +241,7 @@ def _load_npz(path: Path, rate: float | None, rate_option: str = "--rate") -> Re
             raise fail(path, "'rate' must be one number in Hz")
         rate = float(stored.reshape(()))
     elif rate is None:
-        raise fail(path, f"NPZ has no 'rate'; give its sampling rate with {rate_option}")
+        raise ParameterError("rate", f"needed in Hz: {path} is an NPZ with no 'rate' array")
     if "axes" in contents:
         names = np.atleast_1d(contents["axes"])
         if names.dtype.kind not in "US" or names.ndim != 1:

@@ -63,7 +63,7 @@ class LiveSettings:
     max_message_bytes: int = MAX_MESSAGE_BYTES
 
     @classmethod
-    def loopback(cls, **kwargs) -> "LiveSettings":
+    def loopback(cls, **kwargs) -> LiveSettings:
         """Settings for a server that only listens on 127.0.0.1 (Host must be loopback)."""
         return cls(allowed_hosts=LOOPBACK_HOSTS, **kwargs)
 

@@ -14,7 +14,7 @@ another name is refused (400), which defeats DNS rebinding.
 from __future__ import annotations
 
 import secrets
-from typing import Collection
+from collections.abc import Collection
 from urllib.parse import parse_qs, urlsplit
 
 from starlette.datastructures import Headers

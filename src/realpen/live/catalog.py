@@ -13,7 +13,10 @@ from realpen.errors import RealPenError, fail
 from realpen.exports.base import resample_loop
 from realpen.io.files import wav_bytes
 from realpen.pens import BUNDLED_PENS
-from realpen.profile.bundle import PenProfile, list_profiles, load_profile
+from realpen.profile.bundle import PenProfile, load_profile
+from realpen.profile.registry import list_profiles
+
+__all__ = ["MIN_WAV_RATE", "playable_rate", "playable_wav", "CatalogEntry", "Catalog"]
 
 MIN_WAV_RATE = 3000  # browsers' decodeAudioData refuses WAVs below 3 kHz (Chrome, the spec's floor)
 
@@ -66,8 +69,8 @@ class CatalogEntry:
     def tactile_rate(self) -> int:
         """The rate the tactile pattern is served at: its own, or, below 3 kHz (which browsers
         cannot decode), the sound's rate or a whole multiple of its own."""
-        meta = self.profile.meta
-        return playable_rate(meta.tactile.frames, meta.tactile.rate, meta.sound.rate)
+        pattern = self.profile.meta.tactile
+        return playable_rate(pattern.frames, pattern.rate, self.profile.meta.sound.rate)
 
     @cached_property
     def sound_wav(self) -> bytes:
@@ -83,7 +86,11 @@ class CatalogEntry:
                             self.profile.meta.sound.rate, f"{self.profile.name} tactile pattern")
 
     def to_json(self) -> dict:
+        """The entry as the page reads it (``GET /api/profiles``): the pen, its version and
+        coupling, and where to fetch its sound and tactile loops; ``tactile`` describes the
+        :class:`~realpen.tactile.pattern.TactilePattern` (rate, frames, sub-patterns)."""
         meta = self.profile.meta
+        pattern = meta.tactile
         name = self.profile.name
         return {
             "name": name, "tool": meta.tool, "description": meta.description,
@@ -91,7 +98,9 @@ class CatalogEntry:
             "coupling": meta.coupling.to_json(),
             "sound": {"rate": meta.sound.rate, "frames": meta.sound.frames,
                       "wav_rate": self.sound_rate, "url": f"api/profiles/{name}/sound.wav"},
-            "tactile": {"rate": meta.tactile.rate, "frames": meta.tactile.frames,
+            "tactile": {"rate": pattern.rate, "frames": pattern.frames,
+                        "subpatterns": len(pattern.subpatterns),
+                        "subpattern_ms": pattern.subpattern_ms, "boundary": pattern.boundary,
                         "wav_rate": self.tactile_rate,
                         "url": f"api/profiles/{name}/tactile.wav"},
         }
@@ -108,7 +117,7 @@ class Catalog:
     def __init__(self, extra: list[Path] | None = None):
         for folder in extra or []:
             if not Path(folder).is_dir():
-                raise fail(folder, "--profiles: no such folder")
+                raise fail(folder, "no such folder of profiles")
         self.entries: dict[str, CatalogEntry] = {}
         self.skipped: list[str] = []
         for where, path in list_profiles([Path(p) for p in extra or []]):
@@ -128,11 +137,14 @@ class Catalog:
             raise RealPenError("no pen profiles found (the bundled pens are missing?)")
 
     def get(self, name: str) -> CatalogEntry | None:
+        """The entry of a pen by name, or None."""
         return self.entries.get(name)
 
     @property
     def names(self) -> list[str]:
+        """The offered pens' names, bundled pens first."""
         return list(self.entries)
 
     def to_json(self) -> list[dict]:
+        """Every entry's :meth:`CatalogEntry.to_json`, in order."""
         return [entry.to_json() for entry in self.entries.values()]

@@ -25,6 +25,8 @@ from typing import Literal, Protocol
 
 from realpen.profile.bundle import PenProfile
 
+__all__ = ["LOG_LIMIT", "Origin", "PenDevice", "DeviceCommand", "SimulatedDevice"]
+
 LOG_LIMIT = 100_000  # entries kept; older ones are dropped (their indices stay counted)
 
 
@@ -42,13 +44,17 @@ class PenDevice(Protocol):
 
     name: str
 
-    def pen_down(self, origin: Origin, profile: PenProfile, tactile: bool) -> None: ...
+    def pen_down(self, origin: Origin, profile: PenProfile, tactile: bool) -> None:
+        """A stroke starts with ``profile``'s pattern; ``tactile``: the modality includes touch."""
 
-    def gain(self, origin: Origin, value: float) -> None: ...
+    def gain(self, origin: Origin, value: float) -> None:
+        """A new target gain (Eq. 1 before smoothing, 0 … ``a_max``, linear)."""
 
-    def pen_up(self, origin: Origin) -> None: ...
+    def pen_up(self, origin: Origin) -> None:
+        """The stroke ends: silence."""
 
-    def close(self) -> None: ...
+    def close(self) -> None:
+        """The server stops: release the hardware."""
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,7 @@ class DeviceCommand:
     detail: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
+        """Every field, JSON-ready (``GET /api/device/log``)."""
         return asdict(self)
 
 
@@ -97,18 +104,22 @@ class SimulatedDevice:
             self._count += 1
 
     def pen_down(self, origin: Origin, profile: PenProfile, tactile: bool) -> None:
+        """Log ``pen_down`` with the pen, its profile version, ``a_max`` and the smoothing."""
         coupling = profile.meta.coupling
         self._record("pen_down", origin, detail={
             "pen": profile.name, "profile_version": profile.version, "tactile": tactile,
             "a_max": coupling.a_max, "smoothing_ms": coupling.smoothing_ms})
 
     def gain(self, origin: Origin, value: float) -> None:
+        """Log a target gain (linear)."""
         self._record("gain", origin, value=float(value))
 
     def pen_up(self, origin: Origin) -> None:
+        """Log ``pen_up``."""
         self._record("pen_up", origin)
 
     def close(self) -> None:
+        """Mark the device closed."""
         self.closed = True
 
     @property

@@ -20,17 +20,31 @@ Types are strict: a number is a JSON number (an integer where one is counted: ``
 Units: ``t`` in seconds on the page's clock (``performance.now() / 1000``); ``x``, ``y`` in mm
 from the writing surface's top-left corner (CSS pixels over the calibration); ``pressure``
 normalised 0–1 (a mouse reports the constant 0.5); ``tilt_x``, ``tilt_y`` in degrees
-(−90–90, Pointer Events); ``speed`` in mm/s as the page computed it for Eq. 1.
+(−90–90, Pointer Events); ``speed`` in mm/s as the page computed it for Eq. 1. A sample is the
+one stroke-sample definition, :class:`realpen.io.strokes.StrokeSample` (:class:`Sample` is that
+class), which the stroke store and stroke rendering use as well.
+
+This module imports pydantic and :mod:`realpen.io.strokes` only: loading the WebSocket schema
+loads neither scipy nor soundfile.
 """
 
 from __future__ import annotations
 
 import json
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
-from realpen.profile.bundle import NAME_PATTERN
+from realpen.io.strokes import StrokeSample, Time
+
+try:  # the profile schema is pydantic-only, so the name rule can come from its one home
+    from realpen.profile.schema import NAME_PATTERN
+except ImportError:  # pragma: no cover - until realpen.profile.schema exists
+    NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+
+__all__ = ["PROTOCOL", "MAX_MESSAGE_BYTES", "MAX_SAMPLES", "MODALITIES", "NAME_PATTERN",
+           "Sample", "Hello", "PenDown", "Samples", "Gain", "PenUp", "ClientMessage",
+           "CLIENT_MESSAGE", "Ack", "Error", "MessageError", "parse_message"]
 
 PROTOCOL = 1
 MAX_MESSAGE_BYTES = 64 * 1024
@@ -45,8 +59,6 @@ ErrorCode = Literal["binary", "too_large", "invalid_json", "invalid_message", "p
 
 Seq = Annotated[int, Field(ge=0, le=2**53)]
 StrokeNo = Annotated[int, Field(ge=0, le=2**53)]
-Time = Annotated[float, Field(ge=-1e9, le=1e12)]
-Millimetres = Annotated[float, Field(ge=-1e6, le=1e6)]
 
 
 class _Message(BaseModel):
@@ -64,16 +76,8 @@ class Hello(_Message):
     protocol: Literal[1] = PROTOCOL
 
 
-class Sample(_Message):
-    """One pen sample (a coalesced pointer event)."""
-
-    t: Time
-    x: Millimetres
-    y: Millimetres
-    pressure: float = Field(ge=0, le=1)
-    tilt_x: float = Field(0.0, ge=-90, le=90)
-    tilt_y: float = Field(0.0, ge=-90, le=90)
-    speed: float = Field(ge=0, le=1e6)
+Sample = StrokeSample
+"""One pen sample (a coalesced pointer event): the one stroke-sample definition."""
 
 
 class PenDown(_Message):
@@ -120,7 +124,7 @@ class PenUp(_Message):
     t: Time
 
 
-ClientMessage = Annotated[Union[Hello, PenDown, Samples, Gain, PenUp],
+ClientMessage = Annotated[Hello | PenDown | Samples | Gain | PenUp,
                           Field(discriminator="type")]
 CLIENT_MESSAGE: TypeAdapter = TypeAdapter(ClientMessage)
 
@@ -153,6 +157,7 @@ class MessageError(Exception):
         self.code, self.message, self.seq = code, message, seq
 
     def reply(self) -> Error:
+        """The :class:`Error` reply to send."""
         return Error(seq=self.seq, code=self.code, message=self.message)
 
 

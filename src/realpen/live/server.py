@@ -12,13 +12,20 @@ import socket
 
 import uvicorn
 
-from realpen.errors import RealPenError
+from realpen.errors import ParameterError
 
 WS_MAX_FRAME = 1024 * 1024  # frames above this are refused by the protocol layer (close 1009)
 
 
 def bind(host: str, port: int) -> socket.socket:
-    """A listening TCP socket on ``host:port`` (``port`` 0: any free port)."""
+    """A listening TCP socket on ``host:port`` (``port`` 0: any free port).
+
+    Raises:
+        ParameterError: ``port`` is not 0–65535, or cannot be listened on (in use, no
+            permission, or ``host`` is not this machine's).
+    """
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise ParameterError("port", f"{port!r} is not a port number (0–65535)")
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_STREAM)
     try:
@@ -29,8 +36,8 @@ def bind(host: str, port: int) -> socket.socket:
         sock.listen(128)
     except OSError as error:
         sock.close()
-        raise RealPenError(f"--port {port}: cannot listen on {host} ({error.strerror or error})") \
-            from None
+        raise ParameterError("port", f"cannot listen on {host} port {port} "
+                                     f"({error.strerror or error})") from None
     return sock
 
 

@@ -20,9 +20,21 @@ from dataclasses import dataclass
 
 from realpen.live.catalog import Catalog
 from realpen.live.device import Origin, PenDevice
-from realpen.live.messages import (MAX_MESSAGE_BYTES, Ack, Error, Gain, Hello, MessageError, PenDown,
-                       PenUp, Samples, parse_message)
+from realpen.live.messages import (
+    MAX_MESSAGE_BYTES,
+    Ack,
+    Error,
+    Gain,
+    Hello,
+    MessageError,
+    PenDown,
+    PenUp,
+    Samples,
+    parse_message,
+)
 from realpen.live.store import StrokeStore
+
+__all__ = ["Session", "OpenStroke", "TACTILE_MODALITIES"]
 
 log = logging.getLogger(__name__)
 TACTILE_MODALITIES = ("tactile", "auditory-tactile")
@@ -77,9 +89,7 @@ class Session:
     def _dispatch(self, message) -> dict:
         if isinstance(message, Samples):
             self._require(message.stroke)
-            rows = [(s.t, s.x, s.y, s.pressure, s.tilt_x, s.tilt_y, s.speed)
-                    for s in message.samples]
-            self.store.add_samples(self.stroke.stroke_id, rows)
+            self.store.add_samples(self.stroke.stroke_id, message.samples)
             return {}
         if isinstance(message, Gain):
             stroke = self._require(message.stroke)

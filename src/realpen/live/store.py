@@ -4,15 +4,18 @@ Two tables. ``strokes``: one row per stroke — the page connection (``session``
 stroke number, the pen (profile name and content version), modality, ink, pointer type, the
 page's calibration, start and end times (UTC, server clock) and why it ended (``pen_up``,
 ``disconnect``, ``replaced`` by a new pen-down, or ``shutdown``). ``samples``: one row per
-pen sample — ``t`` in s since pen down, ``x``, ``y`` in mm, ``pressure`` 0–1, ``tilt_x``,
-``tilt_y`` in degrees, ``speed`` in mm/s.
+pen sample — the fields of the one stroke-sample definition
+(:class:`realpen.io.strokes.StrokeSample`, :data:`SAMPLE_FIELDS` in that order): ``t`` in s
+since pen down, ``x``, ``y`` in mm, ``pressure`` 0–1, ``tilt_x``, ``tilt_y`` in degrees,
+``speed`` in mm/s.
 
 Every pen-down, sample batch and pen-up is committed when it arrives (WAL journal,
 ``synchronous=NORMAL``: a crash of the server loses nothing committed; closing checkpoints the
 journal back into the one file). A commit only appends to the journal; the checkpoints that
 copy it into the database, and fsync, run on a background thread every second, so the server's
-event loop (which also drives the pen's actuator) never waits for the disk. The SQL is plain so that a SQLAlchemy URL for PostgreSQL can
-stand in for the file when a lab outgrows one machine (a later issue).
+event loop (which also drives the pen's actuator) never waits for the disk. The SQL is plain so
+that a SQLAlchemy URL for PostgreSQL can stand in for the file when a lab outgrows one machine
+(a later issue).
 """
 
 from __future__ import annotations
@@ -23,17 +26,20 @@ import logging
 import os
 import sqlite3
 import threading
-from datetime import datetime, timezone
+from collections.abc import Iterable, Sequence
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Iterable, Sequence
 
 from realpen.errors import fail
 from realpen.io.files import atomic_path
+from realpen.io.strokes import SAMPLE_FIELDS, StrokeSample
+
+__all__ = ["StrokeStore", "export_csv", "SAMPLE_FIELDS", "STROKE_FIELDS", "CSV_COLUMNS",
+           "SCHEMA", "SCHEMA_VERSION", "CHECKPOINT_S"]
 
 SCHEMA_VERSION = 1
 CHECKPOINT_S = 1.0
 log = logging.getLogger(__name__)
-SAMPLE_FIELDS = ("t", "x", "y", "pressure", "tilt_x", "tilt_y", "speed")
 STROKE_FIELDS = ("stroke", "session", "page_stroke", "pen", "profile_version", "modality", "ink",
                  "pointer_type", "px_per_mm", "calibrated", "started_at")
 CSV_COLUMNS = STROKE_FIELDS + ("sample",) + SAMPLE_FIELDS
@@ -59,20 +65,16 @@ CREATE TABLE IF NOT EXISTS strokes (
 CREATE TABLE IF NOT EXISTS samples (
     stroke_id INTEGER NOT NULL REFERENCES strokes(id) ON DELETE CASCADE,
     seq INTEGER NOT NULL,
-    t REAL NOT NULL,
-    x REAL NOT NULL,
-    y REAL NOT NULL,
-    pressure REAL NOT NULL,
-    tilt_x REAL NOT NULL,
-    tilt_y REAL NOT NULL,
-    speed REAL NOT NULL,
+""" + "".join(f"    {name} REAL NOT NULL,\n" for name in SAMPLE_FIELDS) + """\
     PRIMARY KEY (stroke_id, seq)
 ) WITHOUT ROWID;
 """
+_INSERT_SAMPLE = (f"INSERT INTO samples (stroke_id, seq, {', '.join(SAMPLE_FIELDS)}) "
+                  f"VALUES ({', '.join('?' * (len(SAMPLE_FIELDS) + 2))})")
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 def _connect(path: Path, create: bool) -> sqlite3.Connection:
@@ -174,13 +176,22 @@ class StrokeStore:
             self._open[stroke_id] = (page_t0, 0)
             return stroke_id
 
-    def add_samples(self, stroke_id: int, samples: Sequence[Sequence[float]]) -> int:
-        """Append samples ``(t, x, y, pressure, tilt_x, tilt_y, speed)`` (``t`` on the page
-        clock) to an open stroke; returns the stroke's sample count."""
+    def add_samples(self, stroke_id: int,
+                    samples: Sequence[StrokeSample | Sequence[float]]) -> int:
+        """Append samples to an open stroke; returns the stroke's sample count.
+
+        Args:
+            stroke_id: the stroke's id in the store (from :meth:`begin_stroke`).
+            samples: :class:`~realpen.io.strokes.StrokeSample` rows, or tuples of their
+                :data:`SAMPLE_FIELDS` (``t`` in s on the page clock, mm, mm, 0–1, degrees,
+                degrees, mm/s); ``t`` is stored in s since pen down.
+        """
+        rows = [sample.as_row() if isinstance(sample, StrokeSample) else tuple(sample)
+                for sample in samples]
         with self._lock:
             t0, count = self._open[stroke_id]
-            rows = [(stroke_id, count + i, s[0] - t0, *s[1:]) for i, s in enumerate(samples)]
-            self._db.executemany("INSERT INTO samples VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", rows)
+            rows = [(stroke_id, count + i, s[0] - t0, *s[1:]) for i, s in enumerate(rows)]
+            self._db.executemany(_INSERT_SAMPLE, rows)
             count += len(rows)
             self._db.execute("UPDATE strokes SET sample_count=? WHERE id=?", (count, stroke_id))
             self._db.commit()
@@ -236,8 +247,8 @@ def _rows(connection: sqlite3.Connection, stroke: int | None) -> Iterable[tuple]
     where, args = ("WHERE s.id = ?", (stroke,)) if stroke is not None else ("", ())
     return connection.execute(
         "SELECT s.id, s.session, s.page_stroke, s.pen, s.profile_version, s.modality, s.ink, "
-        "s.pointer_type, s.px_per_mm, s.calibrated, s.started_at, p.seq, p.t, p.x, p.y, "
-        f"p.pressure, p.tilt_x, p.tilt_y, p.speed FROM strokes s JOIN samples p "
+        "s.pointer_type, s.px_per_mm, s.calibrated, s.started_at, p.seq, "
+        f"{', '.join(f'p.{name}' for name in SAMPLE_FIELDS)} FROM strokes s JOIN samples p "
         f"ON p.stroke_id = s.id {where} ORDER BY s.id, p.seq", args)
 
 

@@ -1,13 +1,17 @@
 """The pens that ship with RealPen (pencil, ballpoint, marker) and the model that makes them.
 
 The bundled profiles are *modelled*, not recorded: see :mod:`realpen.pens.model` and
-``docs/pen-model.md``. ``scripts/make_bundled_pens.py`` regenerates them identically.
+``docs/pen-model.md``. ``scripts/make_bundled_pens.py`` regenerates them; on another machine
+the floats may differ in their last bits, so they regenerate equal within tolerances and with
+the same canonical version (see ``tests/test_profile.py``).
 """
 
 from __future__ import annotations
 
 from importlib.resources import files
 from pathlib import Path
+
+__all__ = ["BUNDLED_PENS", "BUNDLE_ACTUATOR", "bundled_dir"]
 
 BUNDLED_PENS = ("pencil", "ballpoint", "marker")
 BUNDLE_ACTUATOR = "lra:f0=175,q=8"  # a common LRA; rebuild for your own actuator

@@ -32,6 +32,9 @@ from scipy import signal
 
 from realpen.io.recording import Recording
 
+__all__ = ["VIBRATION_RATE", "SOUND_RATE", "PaperModel", "PenModel", "PENS", "roughness_amplitude",
+           "pen_response", "vibration", "friction_sound"]
+
 VIBRATION_RATE = 1344.0  # Hz, the method's accelerometer rate
 SOUND_RATE = 48000  # Hz
 
@@ -108,7 +111,7 @@ PENS: dict[str, PenModel] = {
 
 
 def _shaped_noise(rng: np.random.Generator, frames: int, rate: float,
-                  amplitude_of: "callable") -> np.ndarray:
+                  amplitude_of: callable) -> np.ndarray:
     """Gaussian noise whose amplitude spectrum follows ``amplitude_of(f)`` (f in Hz)."""
     spectrum = np.fft.rfft(rng.standard_normal(frames))
     freqs = np.fft.rfftfreq(frames, 1.0 / rate)
@@ -163,7 +166,8 @@ def _writing_envelope(frames: int, rate: float, rng: np.random.Generator) -> np.
     """Slow ±10 % fluctuation of the hand's speed and force, with pen-down and lift ramps."""
     t = np.arange(frames) / rate
     phase = rng.uniform(0, 2 * np.pi, 2)
-    envelope = 1 + 0.07 * np.sin(2 * np.pi * 0.9 * t + phase[0]) + 0.03 * np.sin(2 * np.pi * 2.1 * t + phase[1])
+    envelope = (1 + 0.07 * np.sin(2 * np.pi * 0.9 * t + phase[0])
+                + 0.03 * np.sin(2 * np.pi * 2.1 * t + phase[1]))
     ramp = np.clip(t / 0.05, 0, 1) * np.clip((t[-1] - t) / 0.05, 0, 1)
     return envelope * ramp
 
@@ -212,7 +216,8 @@ def friction_sound(pen: PenModel, paper: PaperModel = PaperModel(), duration_s: 
         amplitude = amplitude * r ** 2 / np.sqrt((1 - r ** 2) ** 2 + (r / 0.7) ** 2)
         if pen.squeak_hz > 0:
             s = f / pen.squeak_hz
-            amplitude = amplitude * (1 + 3 / np.sqrt(1 + pen.squeak_q ** 2 * (s - 1 / np.maximum(s, 1e-9)) ** 2))
+            detuning = s - 1 / np.maximum(s, 1e-9)
+            amplitude = amplitude * (1 + 3 / np.sqrt(1 + pen.squeak_q ** 2 * detuning ** 2))
         return amplitude
 
     sound = _shaped_noise(rng, frames, rate, shape)

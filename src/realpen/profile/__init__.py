@@ -1,10 +1,33 @@
 """Pen profiles: one pen's tactile pattern, sound loop, actuator and coupling, as a bundle.
 
-Lives here: :mod:`~realpen.profile.schema` (the versioned ``profile.json``),
-:mod:`~realpen.profile.bundle` (reading and writing folders and zips),
-:mod:`~realpen.profile.build` (recordings → profile), :mod:`~realpen.profile.registry` (the
-bundled and installed profiles), :mod:`~realpen.profile.compare` (distances between pens).
+Lives here: :mod:`~realpen.profile.schema` (the versioned ``profile.json``; pydantic and numpy
+only), :mod:`~realpen.profile.bundle` (the in-memory :class:`PenProfile`; reading and writing
+folders and zips), :mod:`~realpen.profile.build` (recordings → profile),
+:mod:`~realpen.profile.registry` (the bundled and installed profiles),
+:mod:`~realpen.profile.compare` (distances between pens).
 
 May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.dsp`,
-:mod:`realpen.tactile`, :mod:`realpen.sound`, :mod:`realpen.pens` (bundled data only).
+:mod:`realpen.tactile`, :mod:`realpen.sound`, :mod:`realpen.pens` (bundled data only). This
+``__init__`` imports nothing until a name is used, so ``realpen.profile.schema`` stays light.
 """
+
+from __future__ import annotations
+
+import importlib
+
+__all__ = ["PenProfile", "load_profile", "save_profile", "build_profile", "list_profiles",
+           "resolve_profile", "profile_locations", "ProfileMeta", "NAME_PATTERN"]
+
+_HOMES = {"PenProfile": "bundle", "load_profile": "bundle", "save_profile": "bundle",
+          "build_profile": "build", "list_profiles": "registry", "resolve_profile": "registry",
+          "profile_locations": "registry", "ProfileMeta": "schema", "NAME_PATTERN": "schema"}
+
+
+def __getattr__(name: str):
+    if name in _HOMES:
+        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -1,16 +1,16 @@
-"""Pen profiles: one bundle per pen, everything needed to reproduce it.
+"""Pen profile bundles: the in-memory :class:`PenProfile`, and reading and writing bundles.
 
 A bundle is a folder (or the same files in a ``.zip``) holding
 
-- ``profile.json`` — versioned (``"format": 1``) and validated by :class:`ProfileMeta`: name,
-  tool type, the tactile pattern's components per sub-pattern, rates and lengths, the
-  actuator, the coupling constants (Eq. 1), and provenance (source files with SHA-256, every
-  parameter, the package version);
-- ``tactile.wav`` — the looping tactile pattern (mono, 32-bit float);
-- ``sound.wav`` — the looping friction-sound unit (mono, 32-bit float, RMS −20 dBFS).
+- ``profile.json`` — versioned and validated (:mod:`realpen.profile.schema`): name, tool, the
+  tactile pattern's fields, the sound unit, the actuator, the coupling constants (Eq. 1), the
+  two WAVs' rates, lengths and SHA-256, and provenance;
+- ``tactile.wav`` — the looping tactile pattern (mono, 32-bit float, ``smpl`` loop chunk);
+- ``sound.wav`` — the looping friction-sound unit (mono, 32-bit float, RMS −20 dBFS, ``smpl``).
 
 Loading checks that the WAVs are there and are the ones the JSON describes (rate, length,
-SHA-256), so a bundle can be trusted or is refused with one clear line.
+SHA-256), so a bundle can be trusted or is refused with one clear line. Bundles of format 1 are
+read too (:func:`realpen.profile.schema.upgrade`).
 """
 
 from __future__ import annotations
@@ -19,132 +19,35 @@ import hashlib
 import io
 import json
 import os
-import re
 import shutil
 import tempfile
 import zipfile
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
 
 import numpy as np
-import soundfile as sf
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import ValidationError
 
-from realpen import __version__
-from realpen.tactile.actuator import Actuator
-from realpen.sound.coupling import Coupling
-from realpen.errors import RealPenError, fail
+from realpen.errors import ParameterError, fail
 from realpen.io.files import atomic_path, current_umask, wav_bytes
-from realpen.io.recording import Recording
-from realpen.sound.loop import find_loop_unit
-from realpen.tactile.pattern import Pattern, TactileParams, build_pattern
+from realpen.profile.schema import (
+    BUNDLE_FILES,
+    FORMAT,
+    PROFILE_JSON,
+    READABLE_FORMATS,
+    SOUND_WAV,
+    TACTILE_WAV,
+    BundleFiles,
+    ProfileMeta,
+    WavFile,
+    profile_version,
+    upgrade,
+)
+from realpen.tactile.actuator import Actuator
+from realpen.tactile.conditions import TactileParams
+from realpen.tactile.pattern import TactilePattern
 
-FORMAT = 1
-PROFILE_JSON, TACTILE_WAV, SOUND_WAV = "profile.json", "tactile.wav", "sound.wav"
-BUNDLE_FILES = (PROFILE_JSON, TACTILE_WAV, SOUND_WAV)
-NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-
-
-class ComponentEntry(_Strict):
-    """One sinusoid: frequency (Hz), amplitude (full scale), phase (rad), and its origin.
-
-    ``joins_previous`` / ``joins_next``: the component continues a track across that boundary
-    (continuous phase), so the crossfade there is linear rather than equal-power.
-    """
-
-    frequency_hz: float = Field(gt=0)
-    amplitude: float = Field(ge=0)
-    phase: float
-    power: float | None = None
-    weight: float | None = None
-    clipped: bool = False
-    joins_previous: bool = False
-    joins_next: bool = False
-
-
-class TactileSection(_Strict):
-    """The tactile pattern: ``tactile.wav`` and the components it is made of."""
-
-    file: Literal["tactile.wav"] = TACTILE_WAV
-    rate: int = Field(gt=0)
-    frames: int = Field(gt=0)
-    sha256: str
-    subpattern_ms: float = Field(gt=0, le=60_000)
-    boundary: Literal["crossfade", "hard"]
-    crossfade_ms: float = Field(ge=0)
-    subpatterns: list[Annotated[list[ComponentEntry], Field(min_length=1)]] = Field(min_length=1)
-
-    @model_validator(mode="after")
-    def _lengths_agree(self) -> "TactileSection":
-        per_sub = int(round(self.subpattern_ms * self.rate / 1000.0))
-        if per_sub * len(self.subpatterns) != self.frames:
-            raise ValueError(f"{len(self.subpatterns)} sub-patterns of {self.subpattern_ms:g} ms "
-                             f"at {self.rate} Hz are {per_sub * len(self.subpatterns)} frames, "
-                             f"not {self.frames}")
-        return self
-
-
-class SoundSection(_Strict):
-    """The friction-sound unit: ``sound.wav`` and how it was cut."""
-
-    file: Literal["sound.wav"] = SOUND_WAV
-    rate: int = Field(gt=0)
-    frames: int = Field(gt=0)
-    sha256: str
-    mode: Literal["loop", "granular"] = "loop"
-    unit_ms: float = Field(gt=0)
-    crossfade_ms: float = Field(ge=0)
-    start_s: float | None = None
-    rms_dbfs: float
-    seam: dict
-
-
-class ActuatorSection(_Strict):
-    """The actuator the tactile pattern is equalised for."""
-
-    spec: str
-    kind: str
-    params: dict = {}
-    table_hz: list[float] | None = None
-    table_response: list[float] | None = None
-
-
-class SourceFile(_Strict):
-    """A file the profile was built from."""
-
-    role: str
-    name: str
-    sha256: str | None = None
-
-
-class Provenance(_Strict):
-    """Where a profile came from."""
-
-    realpen_version: str
-    sources: list[SourceFile]
-    tactile_parameters: dict
-    sound_parameters: dict
-    model: dict | None = None
-    notes: list[str] = []
-
-
-class ProfileMeta(_Strict):
-    """``profile.json``, format 1."""
-
-    format: Literal[1] = FORMAT
-    name: str = Field(pattern=NAME_PATTERN)
-    tool: str
-    description: str = ""
-    tactile: TactileSection
-    sound: SoundSection
-    actuator: ActuatorSection
-    coupling: Coupling
-    provenance: Provenance
+__all__ = ["PenProfile", "save_profile", "load_profile", "bundle_wavs"]
 
 
 @dataclass
@@ -152,8 +55,10 @@ class PenProfile:
     """A loaded or freshly built pen profile.
 
     Attributes:
-        meta: the validated ``profile.json``.
-        tactile: the tactile pattern, float32, shape (frames,), full scale ±1.
+        meta: the validated ``profile.json`` (``meta.tactile`` is the
+            :class:`~realpen.tactile.pattern.TactilePattern`, ``meta.actuator`` the
+            :class:`~realpen.tactile.actuator.Actuator`, ``meta.coupling`` the coupling).
+        tactile: the tactile pattern's samples, float32, shape (frames,), full scale ±1.
         sound: the sound unit, float32, shape (frames,), full scale ±1.
         path: where it was loaded from (None when built in memory).
     """
@@ -169,13 +74,55 @@ class PenProfile:
         return self.meta.name
 
     @property
+    def actuator(self) -> Actuator:
+        """The actuator the tactile pattern is equalised for."""
+        return self.meta.actuator
+
+    @property
+    def coupling(self):
+        """The coupling constants of Eq. 1 (:class:`realpen.sound.coupling.Coupling`)."""
+        return self.meta.coupling
+
+    @property
+    def pattern(self) -> TactilePattern:
+        """The tactile pattern, its samples those of ``tactile.wav``, with its actuator and
+        (when the provenance holds them) its parameters."""
+        base = self.meta.tactile
+        try:
+            params = TactileParams(**self.meta.provenance.tactile_parameters)
+        except (TypeError, ParameterError):
+            params = None
+        pattern = TactilePattern(base.subpatterns, base.rate, base.subpattern_ms, base.boundary,
+                                 base.crossfade_ms, self.meta.actuator, params,
+                                 notes=tuple(self.meta.provenance.notes))
+        return pattern.with_samples(self.tactile)
+
+    @property
+    def sound_loop(self):
+        """The sound unit as a :class:`realpen.sound.loop.SoundLoop` (the one sound-loop type:
+        samples, rate in Hz, how it was cut, its seam), for the exports and the display."""
+        from realpen.sound.loop import Seam, SoundLoop
+
+        section = self.meta.sound
+        try:
+            seam = Seam(**section.seam)
+        except TypeError:  # a seam report of another shape (or none)
+            seam = None
+        return SoundLoop(samples=self.sound, rate=section.rate, mode=section.mode,
+                         start_s=section.start_s, unit_ms=section.unit_ms,
+                         crossfade_ms=section.crossfade_ms or None, seam=seam,
+                         source=str(self.path) if self.path is not None else self.name)
+
+    @property
     def version(self) -> str:
-        """Content version: the first 12 hex digits of the SHA-256 of ``profile.json``."""
-        return hashlib.sha256(self.json_bytes()).hexdigest()[:12]
+        """Content version: 12 hex digits of the SHA-256 of the canonical form of
+        ``profile.json`` (see :func:`realpen.profile.schema.profile_version`); the same pen
+        has the same version on every machine."""
+        return profile_version(self.meta)
 
     def json_bytes(self) -> bytes:
-        """``profile.json`` exactly as saved."""
-        return (json.dumps(self.meta.model_dump(mode="json"), indent=2) + "\n").encode("utf-8")
+        """``profile.json`` exactly as :func:`save_profile` writes it."""
+        return _document_bytes(self._current_meta(bundle_wavs(self)))
 
     def summary(self) -> str:
         """One line: name, tool, components, lengths, actuator."""
@@ -185,12 +132,51 @@ class PenProfile:
                 f"{'/'.join(map(str, sorted(counts)))} components, {t.rate} Hz; sound "
                 f"{s.unit_ms:g} ms {s.mode} at {s.rate} Hz; actuator {self.meta.actuator.spec}")
 
+    def __repr__(self) -> str:
+        t, s = self.meta.tactile, self.meta.sound
+        tool = self.meta.tool if len(self.meta.tool) <= 40 else self.meta.tool[:37] + "..."
+        return (f"PenProfile({self.name!r}, {tool!r}, tactile {len(t.subpatterns)}×"
+                f"{t.subpattern_ms:g} ms at {t.rate} Hz, sound {s.unit_ms:g} ms at {s.rate} Hz, "
+                f"version {self.version})")
+
+    def _current_meta(self, wavs: dict[str, bytes]) -> ProfileMeta:
+        """``meta`` with ``files`` describing ``wavs``, checked against the samples."""
+        pattern, sound = self.meta.tactile, self.meta.sound
+        if len(self.tactile) != pattern.frames:
+            raise ParameterError("tactile", f"{len(self.tactile)} samples, but the pattern is "
+                                            f"{pattern.frames} at {pattern.rate} Hz")
+        if len(self.sound) != sound.frames:
+            raise ParameterError("sound", f"{len(self.sound)} samples, but the sound section "
+                                          f"says {sound.frames}")
+        files = BundleFiles(
+            tactile=WavFile(file=TACTILE_WAV, rate=pattern.rate, frames=len(self.tactile),
+                            sha256=_sha(wavs[TACTILE_WAV])),
+            sound=WavFile(file=SOUND_WAV, rate=sound.rate, frames=len(self.sound),
+                          sha256=_sha(wavs[SOUND_WAV])))
+        return self.meta.model_copy(update={"files": files})
+
+
+def bundle_wavs(profile: PenProfile) -> dict[str, bytes]:
+    """The two WAV files of a bundle, by name (32-bit float, each one loop with a ``smpl``
+    loop chunk)."""
+    return {TACTILE_WAV: wav_bytes(np.asarray(profile.tactile, dtype=np.float32),
+                                   profile.meta.tactile.rate, loop=True),
+            SOUND_WAV: wav_bytes(np.asarray(profile.sound, dtype=np.float32),
+                                 profile.meta.sound.rate, loop=True)}
+
+
+def _document_bytes(meta: ProfileMeta) -> bytes:
+    return (json.dumps(meta.model_dump(mode="json"), indent=2, allow_nan=False)
+            + "\n").encode("utf-8")
+
 
 def _sha(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
 def _read_wav(data: bytes, name: str, source: object) -> tuple[np.ndarray, int]:
+    import soundfile as sf
+
     try:
         samples, rate = sf.read(io.BytesIO(data), dtype="float32", always_2d=True)
     except (sf.LibsndfileError, RuntimeError, ValueError) as error:
@@ -200,73 +186,23 @@ def _read_wav(data: bytes, name: str, source: object) -> tuple[np.ndarray, int]:
     return samples[:, 0], rate
 
 
-def profile_from_parts(name: str, tool: str, pattern: Pattern, sound: np.ndarray, sound_rate: int,
-                       sound_section: dict, coupling: Coupling, sources: list[SourceFile],
-                       sound_parameters: dict, description: str = "",
-                       model: dict | None = None) -> PenProfile:
-    """Assemble a :class:`PenProfile` from a tactile pattern and a sound unit."""
-    tactile = np.asarray(pattern.samples, dtype=np.float32)
-    sound = np.asarray(sound, dtype=np.float32)
-    params = pattern.params
-    meta = ProfileMeta(
-        name=name, tool=tool, description=description,
-        tactile=TactileSection(
-            rate=pattern.rate, frames=len(tactile), sha256=_sha(wav_bytes(tactile, pattern.rate)),
-            subpattern_ms=params.unit_ms, boundary=params.boundary,
-            crossfade_ms=params.crossfade_ms,
-            subpatterns=[[ComponentEntry(**asdict(c)) for c in sub] for sub in pattern.subpatterns]),
-        sound=SoundSection(rate=sound_rate, frames=len(sound),
-                           sha256=_sha(wav_bytes(sound, sound_rate)), **sound_section),
-        actuator=ActuatorSection(**pattern.actuator.to_json()),
-        coupling=coupling,
-        provenance=Provenance(realpen_version=__version__, sources=sources,
-                              tactile_parameters=asdict(params), sound_parameters=sound_parameters,
-                              model=model, notes=list(pattern.notes)))
-    return PenProfile(meta, tactile, sound)
-
-
-def build_profile(name: str, tool: str, vibration: Recording, sound: Recording, actuator: Actuator,
-                  tactile_params: TactileParams = TactileParams(), unit_ms: float = 300.0,
-                  crossfade_ms: float = 10.0, coupling: Coupling = Coupling(),
-                  description: str = "", model: dict | None = None, progress=None) -> PenProfile:
-    """Run the tactile and the auditory pipelines and bundle the result.
-
-    Args:
-        vibration: the pen's vibration recording (any axes and rate).
-        sound: the pen's friction sound, mono, already at the profile's sound rate.
-        unit_ms, crossfade_ms: loop-unit length and wrap crossfade in ms.
-        model: parameters of the generating model, for modelled pens.
-    """
-    if not re.match(NAME_PATTERN, name):
-        raise RealPenError(f"--name: '{name}' is not a valid profile name (letters, digits, "
-                           f"'-', '_', '.'; up to 64 characters)")
-    pattern = build_pattern(vibration, actuator, tactile_params, progress)
-    unit = find_loop_unit(sound.mono, sound.rate, unit_ms, crossfade_ms, source=sound.source,
-                          recording=sound).normalised()
-    report = unit.to_json()
-    section = {"mode": "loop", "unit_ms": unit.unit_ms, "crossfade_ms": unit.crossfade_ms,
-               "start_s": report["start_s"], "rms_dbfs": report["rms_dbfs"],
-               "seam": report["seam"]}
-    sources = [SourceFile(role="vibration", name=Path(vibration.source).name,
-                          sha256=vibration.sha256),
-               SourceFile(role="sound", name=Path(sound.source).name, sha256=sound.sha256)]
-    return profile_from_parts(name, tool, pattern, unit.samples, int(round(sound.rate)), section,
-                              coupling, sources,
-                              {"unit_ms": unit_ms, "crossfade_ms": crossfade_ms,
-                               "scores": report["scores"], "rate": sound.rate},
-                              description, model)
-
-
 def save_profile(profile: PenProfile, target: str | os.PathLike) -> Path:
     """Write a bundle atomically: a folder, or a ``.zip`` when ``target`` ends in ``.zip``.
 
-    An existing bundle at ``target`` is replaced only once the new one is complete; a folder
-    holding anything but a bundle is never replaced.
+    ``profile.json``'s ``files`` section is made from the samples written. An existing bundle
+    at ``target`` is replaced only once the new one is complete; a folder holding anything but
+    a bundle is never replaced.
+
+    Returns:
+        The bundle's path (a folder's resolved path).
+
+    Raises:
+        ParameterError: the samples do not match the pattern or the sound section.
+        RealPenError: the target cannot be written (naming it).
     """
     target = Path(target)
-    files = {PROFILE_JSON: profile.json_bytes(),
-             TACTILE_WAV: wav_bytes(profile.tactile, profile.meta.tactile.rate),
-             SOUND_WAV: wav_bytes(profile.sound, profile.meta.sound.rate)}
+    wavs = bundle_wavs(profile)
+    files = {PROFILE_JSON: _document_bytes(profile._current_meta(wavs)), **wavs}
     if target.suffix.lower() == ".zip":
         with atomic_path(target) as tmp:
             with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
@@ -321,14 +257,36 @@ def _read_bundle_files(path: Path) -> dict[str, bytes]:
         raise fail(path, f"not a profile folder or a readable .zip ({error})") from None
 
 
+def _first_error(error: ValidationError) -> str:
+    first = error.errors()[0]
+    where = ".".join(str(part) for part in first["loc"])
+    message = first["msg"].removeprefix("Value error, ")
+    return f"{where}: {message}" if where else message
+
+
 def load_profile(path: str | os.PathLike) -> PenProfile:
-    """Load and check a bundle (folder or ``.zip``).
+    """Load and check a bundle (folder or ``.zip``) of format 1 or 2.
+
+    Args:
+        path: the bundle's folder or ``.zip``; a bare name that is no file here (``"pencil"``)
+            is looked up among the installed profiles
+            (:func:`realpen.profile.registry.resolve_profile`).
+
+    Example:
+        >>> load_profile("pencil").meta.tactile
+        TactilePattern(15 sub-patterns × 100 ms, 10 components each, 8000 Hz)
 
     Raises:
         RealPenError: a missing file, an unknown format version, a schema violation, or WAVs
             that do not match the JSON — each as one line naming the bundle.
     """
+    text = os.fspath(path)
     path = Path(path)
+    if not path.exists() and os.sep not in text and (os.altsep or os.sep) not in text \
+            and path.suffix.lower() != ".zip":
+        from realpen.profile.registry import resolve_profile
+
+        return resolve_profile(text)
     files = _read_bundle_files(path)
     missing = [name for name in BUNDLE_FILES if name not in files]
     if missing:
@@ -339,60 +297,24 @@ def load_profile(path: str | os.PathLike) -> PenProfile:
         raise fail(path, f"{PROFILE_JSON} is not valid JSON ({error})") from None
     if not isinstance(document, dict):
         raise fail(path, f"{PROFILE_JSON} must hold a JSON object")
-    if type(document.get("format")) is not int or document["format"] != FORMAT:
-        raise fail(path, f"unknown profile format {document.get('format')!r} "
-                         f"(this RealPen reads format {FORMAT})")
+    if type(document.get("format")) is not int or document["format"] not in READABLE_FORMATS:
+        raise fail(path, f"unknown profile format {document.get('format')!r} (this RealPen "
+                         f"reads formats {', '.join(map(str, READABLE_FORMATS))}; it writes "
+                         f"{FORMAT})")
     try:
-        meta = ProfileMeta.model_validate(document)
+        meta = ProfileMeta.model_validate(upgrade(document))
     except ValidationError as error:
-        first = error.errors()[0]
-        where = ".".join(str(part) for part in first["loc"])
-        raise fail(path, f"{PROFILE_JSON}: {where}: {first['msg']}") from None
+        raise fail(path, f"{PROFILE_JSON}: {_first_error(error)}") from None
     arrays = {}
-    for name, section in ((TACTILE_WAV, meta.tactile), (SOUND_WAV, meta.sound)):
+    for name, wav in ((TACTILE_WAV, meta.files.tactile), (SOUND_WAV, meta.files.sound)):
         data = files[name]
-        if _sha(data) != section.sha256:
+        if _sha(data) != wav.sha256:
             raise fail(path, f"{name} does not match {PROFILE_JSON} (SHA-256 differs)")
         samples, rate = _read_wav(data, name, path)
-        if rate != section.rate or len(samples) != section.frames:
+        if rate != wav.rate or len(samples) != wav.frames:
             raise fail(path, f"{name} is {len(samples)} frames at {rate} Hz; {PROFILE_JSON} says "
-                             f"{section.frames} frames at {section.rate} Hz")
+                             f"{wav.frames} frames at {wav.rate} Hz")
+        if not np.all(np.isfinite(samples)):
+            raise fail(path, f"{name} holds NaN or infinite samples")
         arrays[name] = samples
     return PenProfile(meta, arrays[TACTILE_WAV], arrays[SOUND_WAV], path)
-
-
-def profile_locations(extra: list[Path] | None = None) -> list[tuple[str, Path]]:
-    """Where profiles are looked for, in order: ("bundled", folder), ("user", folder), extras."""
-    from realpen.io.paths import user_profiles_dir
-    from realpen.pens import bundled_dir
-
-    places = [("bundled", bundled_dir()), ("user", user_profiles_dir())]
-    places += [("extra", Path(p)) for p in (extra or [])]
-    return places
-
-
-def list_profiles(extra: list[Path] | None = None) -> list[tuple[str, Path]]:
-    """Every profile found: (where, bundle path), bundled first; later names do not hide earlier.
-
-    A bundle is a sub-folder holding ``profile.json`` or a ``.zip`` file.
-    """
-    found = []
-    for where, folder in profile_locations(extra):
-        if not folder.is_dir():
-            continue
-        for entry in sorted(folder.iterdir()):
-            if (entry.is_dir() and (entry / PROFILE_JSON).is_file()) or entry.suffix == ".zip":
-                found.append((where, entry))
-    return found
-
-
-def resolve_profile(name_or_path: str, extra: list[Path] | None = None) -> PenProfile:
-    """Load a profile by path (folder or ``.zip``) or by name (bundled, user, extra folders)."""
-    candidate = Path(name_or_path)
-    if candidate.exists() or candidate.suffix == ".zip" or os.sep in name_or_path:
-        return load_profile(candidate)
-    for _, path in list_profiles(extra):
-        if path.name == name_or_path or path.stem == name_or_path:
-            return load_profile(path)
-    names = sorted({path.stem for _, path in list_profiles(extra)})
-    raise RealPenError(f"{name_or_path}: no such profile (known: {', '.join(names) or 'none'})")

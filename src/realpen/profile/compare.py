@@ -7,6 +7,8 @@ from scipy import signal
 
 from realpen.profile.bundle import PenProfile
 
+__all__ = ["BAND_HZ", "tactile_spectrum_db", "spectral_distance_db"]
+
 BAND_HZ = (30.0, 700.0)
 
 

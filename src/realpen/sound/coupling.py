@@ -45,9 +45,12 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 from scipy import optimize, signal
 
-from realpen.io.csvtable import read_table
-from realpen.errors import RealPenError, fail
+from realpen.errors import ParameterError, fail
+from realpen.io.csvtable import read_csv
 from realpen.io.files import check_readable_file, write_json
+
+__all__ = ["Coupling", "CouplingFit", "one_pole", "fit_coupling", "load_measurements", "FORMAT",
+           "FIXABLE", "REPRODUCE_TOLERANCE"]
 
 FORMAT = "realpen.coupling/1"
 FIXABLE = ("c_ov", "c_op")
@@ -108,15 +111,29 @@ class Coupling(BaseModel):
         return np.clip(ratio ** self.rate_exponent, self.rate_min, self.rate_max)
 
     def smooth(self, values: np.ndarray, rate: float, initial: float = 0.0) -> np.ndarray:
-        """Apply the one-pole smoother to a per-sample control signal at ``rate`` Hz."""
+        """Apply the one-pole smoother to a per-sample control signal at ``rate`` Hz.
+
+        Args:
+            values: the control signal, one value per sample.
+            rate: samples per second, in Hz.
+            initial: the state before the first sample.
+        """
         return one_pole(values, rate, self.smoothing_ms, initial)
 
     def to_json(self) -> dict:
         """The JSON document (every field, ``format`` first)."""
         return self.model_dump()
 
+    def __repr__(self) -> str:
+        return (f"Coupling(c_p={self.c_p:.4g}, c_op={self.c_op:.4g}, c_x={self.c_x:.4g} per mm/s, "
+                f"c_ov={self.c_ov:.4g} mm/s, a_max={self.a_max:.4g}, smoothing_ms="
+                f"{self.smoothing_ms:.4g}, rate=(v/{self.rate_speed_ref:.4g})^"
+                f"{self.rate_exponent:.4g} in [{self.rate_min:.4g}, {self.rate_max:.4g}])")
+
+    __str__ = __repr__
+
     @classmethod
-    def from_json(cls, data: object, source: object = "coupling") -> "Coupling":
+    def from_json(cls, data: object, source: object = "coupling") -> Coupling:
         """Validate a JSON document; problems become one :class:`RealPenError` line."""
         try:
             return cls.model_validate(data)
@@ -126,7 +143,7 @@ class Coupling(BaseModel):
             raise fail(source, f"{where}: {first['msg']}") from None
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "Coupling":
+    def load(cls, path: str | os.PathLike) -> Coupling:
         """Load a coupling JSON file."""
         path = Path(path)
         check_readable_file(path)
@@ -139,7 +156,7 @@ class Coupling(BaseModel):
         return cls.from_json(data, path)
 
     def save(self, path: str | os.PathLike) -> None:
-        """Write the coupling JSON atomically."""
+        """Write the coupling JSON to ``path`` atomically."""
         write_json(path, self.to_json())
 
 
@@ -213,17 +230,19 @@ def fit_coupling(pressure: np.ndarray, speed: np.ndarray, amplitude: np.ndarray,
         source: names the data in error messages.
 
     Raises:
+        ParameterError: ``fix`` not ``"c_ov"`` or ``"c_op"``, or a ``value`` that is not a finite
+            number.
         RealPenError: too few pen-down rows, pressure and speed not varying independently, a
-            held value that is not finite, a held threshold that cannot be solved for (its
-            partner's coefficient is 0), or constants that are not finite or too large to
-            reproduce the fitted gains in floating point (a held value far from the data).
+            held threshold that cannot be solved for (its partner's coefficient is 0), or
+            constants that are not finite or too large to reproduce the fitted gains in floating
+            point (a held value far from the data).
     """
     base = base or Coupling()
     if fix not in FIXABLE:
-        raise RealPenError(f"--fix: choose c_ov or c_op, got '{fix}'")
+        raise ParameterError("fix", f"choose c_ov or c_op, got {fix!r}")
     held = float(getattr(base, fix) if value is None else value)
     if not math.isfinite(held):
-        raise RealPenError(f"--value must be a finite number, got {held:g}")
+        raise ParameterError("value", f"must be a finite number, got {held:g}")
     pressure, speed, amplitude = (np.asarray(a, dtype=np.float64) for a in
                                   (pressure, speed, amplitude))
     down = pressure > 0
@@ -258,13 +277,13 @@ def fit_coupling(pressure: np.ndarray, speed: np.ndarray, amplitude: np.ndarray,
     except ValidationError as error:
         name = str(error.errors()[0]["loc"][0])
         raise fail(source, f"the fit gives {name} = {fitted.get(name, float('nan')):g}, not a "
-                           f"finite number (--value {held:g} for {fix} is too far from the "
+                           f"finite number (the held {fix} = {held:g} is too far from the "
                            f"data)") from None
     predicted = coupling.gain_raw(pressure[down], speed[down])
     exact = np.clip(design @ solution, 0.0, base.a_max)
     if not np.allclose(predicted, exact, rtol=0.0, atol=REPRODUCE_TOLERANCE):
         other = "c_op" if fix == "c_ov" else "c_ov"
-        raise fail(source, f"--value {held:g} for {fix} gives {other} = {params[other]:g}; "
+        raise fail(source, f"holding {fix} = {held:g} gives {other} = {params[other]:g}; "
                            f"constants this large no longer reproduce the fitted gains in "
                            f"floating point (hold a value nearer the data)")
     residual = predicted - target
@@ -280,7 +299,7 @@ def load_measurements(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
     Raises:
         RealPenError: any problem with the file or a value out of range.
     """
-    table = read_table(path, ("pressure", "speed", "amplitude"))
+    table = read_csv(path, ("pressure", "speed", "amplitude"))
     columns = table.columns
     checks = (("pressure", 0.0, 1.0), ("speed", 0.0, np.inf), ("amplitude", 0.0, np.inf))
     for name, low, high in checks:

@@ -17,16 +17,32 @@ faster strokes are made brighter.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from realpen import __version__
-from realpen.errors import RealPenError, fail
+from realpen.errors import ParameterError, fail
 from realpen.io.recording import Recording
-from realpen.sound.loop import (EDGE_MS, HOP_MS, REFERENCE_DBFS, SILENCE_DB, Seam, check_level, check_ms,
-                    check_rate, level_db, require_sound, samples_for, seam_report)
+from realpen.sound.loop import (
+    EDGE_MS,
+    HOP_MS,
+    REFERENCE_DBFS,
+    SILENCE_DB,
+    SoundLoop,
+    _mono,
+    check_level,
+    check_ms,
+    check_rate,
+    load_sound,
+    require_sound,
+    samples_for,
+    seam_report,
+)
+
+__all__ = ["SteadyPart", "steady_part", "grain_samples", "granular", "granular_loop",
+           "GRAIN_MS", "LENGTH_MS", "MAX_LENGTH_MS", "STEADY_DB", "LEVEL_SMOOTH_MS"]
 
 GRAIN_MS = 50.0
 LENGTH_MS = 3000.0
@@ -36,7 +52,7 @@ LEVEL_SMOOTH_MS = 100.0
 _BLOCK = 1024  # grains rendered at once
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False, eq=False)
 class SteadyPart:
     """Where grains may come from.
 
@@ -52,6 +68,10 @@ class SteadyPart:
     stretches: list[tuple[int, int]]
     rms: float
 
+    def __repr__(self) -> str:
+        return (f"SteadyPart({len(self.starts)} grain starts in {len(self.stretches)} "
+                f"stretch(es), span {self.span} samples, rms {self.rms:.4g})")
+
 
 def steady_part(x: np.ndarray, rate: float, span_ms: float, tolerance_db: float = STEADY_DB,
                 source: object = "signal") -> SteadyPart:
@@ -65,7 +85,8 @@ def steady_part(x: np.ndarray, rate: float, span_ms: float, tolerance_db: float 
         source: names the recording in error messages.
 
     Raises:
-        RealPenError: a rate out of range, silence, or no steady stretch as long as ``span_ms``.
+        ParameterError: a rate out of range or a bad ``span_ms``.
+        RealPenError: silence, or no steady stretch as long as ``span_ms``.
     """
     x = np.asarray(x, dtype=np.float64)
     check_rate(rate)
@@ -131,12 +152,17 @@ def granular(x: np.ndarray, rate: float, frames: int, part: SteadyPart,
 
     Returns:
         shape (frames,), with the power of the steady material.
+
+    Raises:
+        ParameterError: ``frames`` not a multiple of half a grain for a circular texture, a
+            playback rate reading past the steady part's span, or a negative ``seed``.
     """
     x = np.asarray(x, dtype=np.float64)
     grain = grain_samples(grain_ms, rate)
     hop = grain // 2
     if circular and frames % hop:
-        raise ValueError(f"a circular texture needs a multiple of {hop} frames, got {frames}")
+        raise ParameterError("frames", f"a circular texture needs a multiple of {hop} frames, "
+                                       f"got {frames}")
     first = 0 if circular else -1
     positions = np.arange(first, -(-frames // hop)) * hop
     if playback_rate is None:
@@ -145,9 +171,9 @@ def granular(x: np.ndarray, rate: float, frames: int, part: SteadyPart,
         centres = np.clip(positions + hop, 0, frames - 1)
         rates = np.asarray(playback_rate, dtype=np.float64)[centres]
     if np.any(rates * (grain - 1) + 1 >= part.span):
-        raise ValueError("playback rate too high for the steady part's span")
+        raise ParameterError("playback_rate", "too high for the steady part's span")
     if seed < 0:
-        raise RealPenError(f"--seed must be ≥ 0, got {seed}")
+        raise ParameterError("seed", f"must be >= 0, got {seed}")
     rng = np.random.default_rng(seed)
     offsets = rng.choice(part.starts, size=len(positions))
     window = np.sin(np.pi * (np.arange(grain) + 0.5) / grain)
@@ -172,96 +198,80 @@ def granular(x: np.ndarray, rate: float, frames: int, part: SteadyPart,
     return body
 
 
-@dataclass(frozen=True)
-class GranularTexture:
-    """A seamless granular loop and where its grains came from.
-
-    Attributes:
-        samples: the texture, shape (frames,), full scale ±1.
-        rate: its rate in Hz.
-        part: the steady part the grains came from (positions in samples).
-        grain_ms: grain length in ms; seed: seed of the grain offsets.
-        seam: the texture's seam report (dB).
-        gain: linear gain applied to the grains (steady RMS → the requested dBFS).
-        source, source_sha256, history: the recording.
-    """
-
-    samples: np.ndarray
-    rate: float
-    part: SteadyPart
-    grain_ms: float
-    seed: int
-    seam: Seam
-    gain: float = 1.0
-    source: str | None = None
-    source_sha256: str | None = None
-    history: tuple[str, ...] = ()
-
-    def to_json(self) -> dict:
-        """The ``realpen sound loop --mode granular --json`` document."""
-        stretches = [[round(a / self.rate, 6), round(b / self.rate, 6)]
-                     for a, b in self.part.stretches]
-        return {
-            "realpen_version": __version__,
-            "mode": "granular",
-            "source": {"path": self.source, "sha256": self.source_sha256,
-                       "history": list(self.history)},
-            "rate": self.rate,
-            "frames": int(len(self.samples)),
-            "length_ms": round(len(self.samples) / self.rate * 1000, 3),
-            "start_s": stretches[0][0],
-            "end_s": stretches[-1][1],
-            "steady_stretches_s": stretches,
-            "steady_s": round(sum(b - a for a, b in self.part.stretches) / self.rate, 6),
-            "grain_ms": self.grain_ms,
-            "seed": self.seed,
-            "seam": self.seam.to_json(),
-            "gain": self.gain,
-            "rms_dbfs": round(level_db(self.samples), 3),
-        }
-
-
-def granular_loop(x: np.ndarray, rate: float, length_ms: float = LENGTH_MS,
-                  grain_ms: float = GRAIN_MS, seed: int = 0, rms_dbfs: float = REFERENCE_DBFS,
-                  source: object = "signal", recording: Recording | None = None
-                  ) -> GranularTexture:
+def granular_loop(sound: Recording | np.ndarray | SoundLoop | str | os.PathLike,
+                  rate: float | None = None, *, length_ms: float = LENGTH_MS,
+                  grain_ms: float = GRAIN_MS, seed: int = 0,
+                  level_dbfs: float = REFERENCE_DBFS, source: object | None = None,
+                  recording: Recording | None = None) -> SoundLoop:
     """A granular texture of ``length_ms`` (rounded to half grains) that loops without a seam.
 
-    The texture is scaled so the steady material has an RMS of ``rms_dbfs`` dB re full scale.
+    The texture is scaled so the steady material has an RMS of ``level_dbfs`` dB re full scale
+    (dBFS).
 
     Args:
-        x: the recording, shape (frames,), full scale ±1.
-        rate: its rate in Hz (also the texture's).
+        sound: a recording (mixed down when it has several channels), an array of samples
+            (frames,) with ``rate``, a :class:`~realpen.sound.loop.SoundLoop` (its samples are
+            the material) or the path of an audio file (read by
+            :func:`~realpen.sound.loop.load_sound`).
+        rate: the array's rate in Hz (also the texture's); for a recording, resample to this
+            rate first (None keeps its own); for a path, the rate to load at (None: 48 kHz).
         length_ms: texture length in ms, from 60 ms (and two grains) up to ``MAX_LENGTH_MS``
             (60 s).
         grain_ms: grain length in ms (finite, positive).
         seed: seed of the random grain offsets (≥ 0).
-        rms_dbfs: RMS of the steady material in dBFS, finite and at most 0.
-        source: names the recording in error messages.
-        recording: the loaded recording, for provenance in the JSON.
+        level_dbfs: RMS of the steady material in dBFS, finite and at most 0.
+        source: names the recording in error messages (default: the recording's file).
+        recording: the loaded recording, for provenance in the JSON, when ``sound`` is an
+            array.
+
+    Returns:
+        The :class:`~realpen.sound.loop.SoundLoop` (``mode="granular"``).
 
     Raises:
-        RealPenError: a rate out of range, bad lengths or level, silence, or no steady stretch
-            as long as a grain.
+        ParameterError: a rate out of range, bad lengths, level or seed.
+        RealPenError: silence, or no steady stretch as long as a grain.
+
+    Example:
+        >>> import numpy as np
+        >>> noise = np.random.default_rng(0).normal(0, 0.1, 3 * 48000)
+        >>> texture = granular_loop(noise, 48000, length_ms=1000)
+        >>> texture.mode, texture.frames, round(texture.rms_dbfs)
+        ('granular', 48000, -20)
     """
-    check_rate(rate)
-    check_ms("--grain-ms", grain_ms)
-    check_ms("--length-ms", length_ms)
-    check_level(rms_dbfs)
+    if isinstance(sound, (str, os.PathLike)):
+        sound = load_sound(sound, 48000 if rate is None else rate)
+        rate = None
+    if isinstance(sound, SoundLoop):
+        if rate is not None and abs(rate - sound.rate) > 1e-9:
+            raise ParameterError("rate", f"a sound loop is at its own rate ({sound.rate:g} Hz), "
+                                         f"got {rate:g}")
+        x, rate = sound.samples, check_rate(sound.rate)
+        name = source or sound.source or "loop"
+        provenance = (sound.source, sound.source_sha256, sound.history)
+    else:
+        x, rate, loaded, name = _mono(sound, rate, source)
+        recording = recording or loaded
+        provenance = ((recording.source, recording.sha256, recording.history) if recording
+                      else (None, None, ()))
+    check_ms("grain_ms", grain_ms)
+    check_ms("length_ms", length_ms)
+    check_level(level_dbfs)
     hop = grain_samples(grain_ms, rate) // 2
     shortest = max(3 * EDGE_MS, 2 * grain_ms)
     if length_ms < shortest:
-        raise RealPenError(f"--length-ms must be at least {shortest:g} ms, got {length_ms:g}")
+        raise ParameterError("length_ms", f"must be at least {shortest:g} ms, got {length_ms:g}")
     if length_ms > MAX_LENGTH_MS:
-        raise RealPenError(f"--length-ms must be at most {MAX_LENGTH_MS:g} ms "
-                           f"({MAX_LENGTH_MS / 1000:g} s), got {length_ms:g}")
+        raise ParameterError("length_ms", f"must be at most {MAX_LENGTH_MS:g} ms "
+                                          f"({MAX_LENGTH_MS / 1000:g} s), got {length_ms:g}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError("seed", f"must be a whole number >= 0, got {seed!r}")
     frames = max(1, int(round(length_ms * rate / 1000 / hop))) * hop
-    part = steady_part(x, rate, (grain_samples(grain_ms, rate) + 2) * 1000 / rate, source=source)
+    part = steady_part(x, rate, (grain_samples(grain_ms, rate) + 2) * 1000 / rate, source=name)
     texture = granular(x, rate, frames, part, grain_ms, seed, circular=True)
-    gain = 10 ** (rms_dbfs / 20) / part.rms
+    gain = 10 ** (level_dbfs / 20) / part.rms
     texture = texture * gain
-    return GranularTexture(samples=texture, rate=float(rate), part=part, grain_ms=float(grain_ms),
-                           seed=int(seed), seam=seam_report(texture, rate, source=source),
-                           gain=float(gain), source=recording.source if recording else None,
-                           source_sha256=recording.sha256 if recording else None,
-                           history=recording.history if recording else ())
+    return SoundLoop(samples=texture, rate=float(rate), mode="granular",
+                     start_s=part.stretches[0][0] / rate, seam=seam_report(texture, rate,
+                                                                           source=name),
+                     part=part, grain_ms=float(grain_ms), seed=int(seed), gain=float(gain),
+                     source=provenance[0], source_sha256=provenance[1], history=provenance[2])

@@ -1,4 +1,4 @@
-"""Friction sound: loading, the seamless loop unit, and the seam report.
+"""Friction sound: loading, the one :class:`SoundLoop` type, the seamless loop unit, the seam.
 
 The method plays each pen's recorded friction sound in a loop while the pen writes. The loop
 unit (300 ms by default) is the window of the recording whose head and tail match best, is
@@ -29,27 +29,49 @@ already differ by 3–5 dB per band by chance. Windows whose level, head or tail
 The scan measures head and tail exactly as :func:`seam_report` measures the finished loop, so
 the chosen window's ``level_jump_db`` is the seam's.
 
-Limits, checked wherever a value is taken (one-line :class:`~realpen.errors.RealPenError`):
-rates from ``MIN_RATE`` (8 kHz: the bands need room between 100 Hz and 0.45 × rate) to
-``MAX_RATE`` (384 kHz); lengths in ms finite and positive; a loop level (RMS, dBFS) finite and
-at most 0 dBFS; a recording whose level with its mean removed lies below ``SILENT_DBFS`` —
-digital silence, or a constant (DC) value — is refused as silent.
+One type. A :class:`SoundLoop` is every sound unit RealPen plays: a unit found by
+:func:`find_loop` (``mode="loop"``), a granular texture made by
+:func:`realpen.sound.granular.granular_loop` (``mode="granular"``), or a ready loop read from a
+WAV file that declares its loop in a ``smpl`` chunk (as ``realpen sound loop`` writes it; see
+:func:`load_sound`). Stroke rendering, profiles and exports all take it.
+
+Limits, checked wherever a value is taken: rates from ``MIN_RATE`` (8 kHz: the bands need room
+between 100 Hz and 0.45 × rate) to ``MAX_RATE`` (384 kHz); lengths in ms finite and positive; a
+loop level (RMS, dBFS) finite and at most 0 dBFS. A bad argument raises
+:class:`~realpen.errors.ParameterError` naming the Python parameter (``unit_ms``, ``rate``,
+``level_dbfs``, ...); bad data (a file, a recording that is silent — digital silence or a
+constant (DC) value, RMS below ``SILENT_DBFS`` with its mean removed — or too short) raises
+:class:`~realpen.errors.RealPenError` naming the source.
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from realpen import __version__
-from realpen.errors import RealPenError, fail
-from realpen.io.recording import Recording, load_recording
 from realpen.dsp.filters import resample
+from realpen.errors import ParameterError, fail
+from realpen.io.files import read_smpl_loop, wav_bytes, write_wav
+from realpen.io.recording import Recording, load_recording
+
+if TYPE_CHECKING:
+    from realpen.sound.granular import SteadyPart
+
+__all__ = [
+    "SoundLoop", "Seam", "Scan", "find_loop", "find_loop_unit", "load_sound", "seam_report",
+    "scan_windows", "make_loop", "crossfade_gains", "band_levels_db", "normalise", "level_db",
+    "require_sound", "samples_for", "check_ms", "check_rate", "check_level", "ProgressCallback",
+    "DEFAULT_RATE", "UNIT_MS", "CROSSFADE_MS", "EDGE_MS", "HOP_MS", "SILENCE_DB", "SILENT_DBFS",
+    "REFERENCE_DBFS", "MAX_LEVEL_DBFS", "MIN_RATE", "MAX_RATE", "FLOOR_DB", "BANDS", "WEIGHTS",
+    "MODES",
+]
 
 DEFAULT_RATE = 48000
 UNIT_MS = 300.0
@@ -66,6 +88,7 @@ FLOOR_DB = 80.0         # band levels further below the loud frames are treated 
 BANDS = (24, 100.0, 16000.0)
 WEIGHTS = {"level_jump_db": 3.0, "spectral_db": 1.0, "stationarity_db": 1.0,
            "quietness_db": 1.0}
+MODES = ("loop", "granular")
 NOT_AUDIO = (".csv", ".npz", ".json", ".txt")
 _CHUNK = 2048  # frames per FFT block, to bound memory on long recordings
 
@@ -77,56 +100,84 @@ def samples_for(ms: float, rate: float) -> int:
     return int(round(ms * rate / 1000.0))
 
 
-def check_ms(name: str, value: float) -> float:
-    """Return ``value`` (a length in ms) as float; :class:`RealPenError` unless finite and > 0.
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+
+def check_ms(parameter: str, value: float) -> float:
+    """Return ``value`` (a length in ms) as float.
 
     Args:
-        name: the option that gave it, e.g. ``"--unit-ms"``, for the message.
+        parameter: the Python parameter that gave it, e.g. ``"unit_ms"``, for the message.
         value: the length in ms.
+
+    Raises:
+        ParameterError: ``value`` is not a finite number of ms above 0.
     """
-    if not np.isfinite(value) or value <= 0:
-        raise RealPenError(f"{name} must be a finite number of ms above 0, got {value:g}")
+    if not _is_number(value) or not np.isfinite(value) or value <= 0:
+        shown = f"{value:g}" if _is_number(value) else repr(value)
+        raise ParameterError(parameter, f"must be a finite number of ms above 0, got {shown}")
     return float(value)
 
 
-def check_rate(rate: float, name: object = "--rate") -> float:
+def _rate_problem(rate) -> str | None:
+    """What is wrong with a sample rate in Hz, or None."""
+    if not _is_number(rate) or not np.isfinite(rate) or rate <= 0:
+        shown = f"{rate:g}" if _is_number(rate) else repr(rate)
+        return f"must be a positive number of Hz, got {shown}"
+    if rate < MIN_RATE:
+        return (f"{rate:g} Hz is too low for friction sound; the minimum is {MIN_RATE:g} Hz "
+                f"(the seam is judged on bands from 100 Hz up to 0.45 × rate)")
+    if rate > MAX_RATE:
+        return f"{rate:g} Hz is too high; the maximum is {MAX_RATE:g} Hz"
+    return None
+
+
+def check_rate(rate: float, parameter: str = "rate") -> float:
     """Return a sample rate in Hz as float, between ``MIN_RATE`` and ``MAX_RATE`` Hz.
 
     Args:
         rate: sample rate in Hz.
-        name: the option or the file that gave it, for the message.
+        parameter: the Python parameter that gave it, for the message.
 
     Raises:
-        RealPenError: a rate that is not finite, or outside 8 kHz – 384 kHz.
+        ParameterError: a rate that is not finite, or outside 8 kHz – 384 kHz.
     """
-    if not np.isfinite(rate) or rate <= 0:
-        raise RealPenError(f"{name} must be a positive number of Hz, got {rate:g}")
-    if rate < MIN_RATE:
-        raise RealPenError(f"{name}: {rate:g} Hz is too low for friction sound; the minimum is "
-                           f"{MIN_RATE:g} Hz (the seam is judged on bands from 100 Hz up to "
-                           f"0.45 × rate)")
-    if rate > MAX_RATE:
-        raise RealPenError(f"{name}: {rate:g} Hz is too high; the maximum is {MAX_RATE:g} Hz")
+    problem = _rate_problem(rate)
+    if problem is not None:
+        raise ParameterError(parameter, problem)
     return float(rate)
 
 
-def check_level(level_dbfs: float, name: str = "--level-dbfs") -> float:
-    """Return a loop level (RMS in dB re full scale) as float; finite and ≤ ``MAX_LEVEL_DBFS``.
+def _check_source_rate(rate: float, source: object) -> float:
+    """Like :func:`check_rate` for a rate that a file or a recording carries: a data problem."""
+    problem = _rate_problem(rate)
+    if problem is not None:
+        raise fail(source, problem if not problem.startswith("must") else f"rate {problem}")
+    return float(rate)
+
+
+def check_level(level_dbfs: float, parameter: str = "level_dbfs") -> float:
+    """Return a loop level (RMS in dB re full scale, dBFS) as float; finite, ≤ ``MAX_LEVEL_DBFS``.
 
     Args:
         level_dbfs: RMS level in dBFS.
-        name: the option that gave it, for the message.
+        parameter: the Python parameter that gave it, for the message.
+
+    Raises:
+        ParameterError: not a finite level of at most 0 dBFS.
     """
-    if not np.isfinite(level_dbfs) or level_dbfs > MAX_LEVEL_DBFS:
-        raise RealPenError(f"{name} must be a finite level of at most {MAX_LEVEL_DBFS:g} dBFS, "
-                           f"got {level_dbfs:g}")
+    if not _is_number(level_dbfs) or not np.isfinite(level_dbfs) or level_dbfs > MAX_LEVEL_DBFS:
+        shown = f"{level_dbfs:g}" if _is_number(level_dbfs) else repr(level_dbfs)
+        raise ParameterError(parameter, f"must be a finite level of at most {MAX_LEVEL_DBFS:g} "
+                                        f"dBFS, got {shown}")
     return float(level_dbfs)
 
 
 def level_db(x: np.ndarray) -> float:
     """RMS level of ``x`` (full scale ±1) in dB re full scale, i.e. dBFS (−inf for silence)."""
     power = float(np.mean(np.square(x))) if len(x) else 0.0
-    return 10 * np.log10(power) if power > 0 else -np.inf
+    return float(10 * np.log10(power)) if power > 0 else float("-inf")
 
 
 def require_sound(x: np.ndarray, source: object) -> None:
@@ -148,8 +199,15 @@ def require_sound(x: np.ndarray, source: object) -> None:
         raise fail(source, f"recording is silent ({shown})")
 
 
-def load_sound(path: str | os.PathLike, rate: float | None = DEFAULT_RATE) -> Recording:
-    """Load a friction-sound recording: WAV/FLAC/OGG at any rate, mixed down to mono.
+def load_sound(path: str | os.PathLike, rate: float | None = DEFAULT_RATE
+               ) -> Recording | SoundLoop:
+    """Load a friction sound: WAV/FLAC/OGG at any rate, mixed down to mono.
+
+    A WAV whose ``smpl`` chunk declares a loop (as ``realpen sound loop`` writes it, or a
+    sampler or audio editor) is a ready loop: its loop (the frames from the loop's start to its
+    end, inclusive) comes back as a :class:`SoundLoop`, which every command and function that
+    takes a sound plays as it is. Resampling a ready loop is circular (FFT), so it stays
+    seamless; its length is rounded to whole samples at the new rate.
 
     Args:
         path: the audio file.
@@ -157,11 +215,21 @@ def load_sound(path: str | os.PathLike, rate: float | None = DEFAULT_RATE) -> Re
             must lie between ``MIN_RATE`` (8 kHz) and ``MAX_RATE`` (384 kHz).
 
     Returns:
-        A one-axis :class:`~realpen.recording.Recording` (axis ``"mono"``, full scale ±1).
+        A one-axis :class:`~realpen.io.recording.Recording` (axis ``"mono"``, full scale ±1),
+        or a :class:`SoundLoop` for a WAV that declares its loop.
 
     Raises:
-        RealPenError: missing, empty, truncated or non-audio files, NaN/inf, a rate out of
-            range, silence or a constant (DC) signal.
+        ParameterError: ``rate`` out of range.
+        RealPenError: missing, empty, truncated or non-audio files, NaN/inf, a file's rate out
+            of range, silence or a constant (DC) signal, a ``smpl`` loop outside the file.
+
+    Example:
+        >>> import tempfile, pathlib, numpy as np
+        >>> path = pathlib.Path(tempfile.mkdtemp()) / "loop.wav"
+        >>> noise = np.random.default_rng(0).normal(0, 0.1, 48000)
+        >>> find_loop(noise, rate=48000).save(path)
+        >>> load_sound(path).mode, len(load_sound(path).samples)
+        ('loop', 14400)
     """
     path = Path(path)
     if rate is not None:
@@ -172,29 +240,59 @@ def load_sound(path: str | os.PathLike, rate: float | None = DEFAULT_RATE) -> Re
     channels = loaded.samples.shape[1]
     mono = loaded.samples.mean(axis=1)
     step = f"mixdown:{channels}ch" if channels > 1 else "mono"
+    points = read_smpl_loop(path)
+    if points is not None:
+        return _ready_loop(loaded, mono, step, points, rate, path)
     # Judged before resampling too: the filter's edge transients would give a constant (DC)
     # recording an AC part of its own.
     require_sound(mono, path)
     sound = loaded.with_samples(mono[:, None], step, axes=("mono",))
     if rate is None:
-        check_rate(sound.rate, path)
+        _check_source_rate(sound.rate, path)
     else:
         sound = resample(sound, float(rate))
     require_sound(sound.mono, path)
     return sound
 
 
-def normalise(x: np.ndarray, rms_dbfs: float = REFERENCE_DBFS) -> tuple[np.ndarray, float]:
-    """Scale ``x`` to an RMS of ``rms_dbfs`` dB re full scale; returns (scaled, linear gain).
+def _ready_loop(loaded: Recording, mono: np.ndarray, step: str, points: tuple[int, int],
+                rate: float | None, path: Path) -> SoundLoop:
+    """The loop a WAV's ``smpl`` chunk declares, as a :class:`SoundLoop`."""
+    start, end = points
+    if end >= len(mono):
+        raise fail(path, f"the smpl chunk's loop ({start}–{end}) lies outside the file's "
+                         f"{len(mono)} frames")
+    _check_source_rate(loaded.rate, path)
+    samples = np.array(mono[start:end + 1], dtype=np.float64)
+    require_sound(samples, path)
+    history = loaded.history + (step, f"smpl-loop:{start}-{end}")
+    own_rate = float(loaded.rate)
+    if rate is not None and abs(float(rate) - own_rate) > 1e-9:
+        from scipy.signal import resample as fft_resample
+
+        frames = max(1, int(round(len(samples) * float(rate) / own_rate)))
+        samples = fft_resample(samples, frames)  # periodic: the wrap stays seamless
+        history += (f"resample-circular:{float(rate):g}Hz",)
+        own_rate = float(rate)
+    return SoundLoop.from_samples(samples, own_rate, start_s=start / loaded.rate,
+                                  source=str(path), source_sha256=loaded.sha256, history=history)
+
+
+def normalise(x: np.ndarray, level_dbfs: float = REFERENCE_DBFS) -> tuple[np.ndarray, float]:
+    """Scale ``x`` to an RMS of ``level_dbfs`` dB re full scale (dBFS); returns (scaled, gain).
+
+    Args:
+        x: samples, full scale ±1.
+        level_dbfs: the RMS to reach in dBFS (finite, at most 0).
 
     Raises:
-        RealPenError: ``rms_dbfs`` not finite or above ``MAX_LEVEL_DBFS`` (0 dBFS).
+        ParameterError: ``level_dbfs`` not finite or above ``MAX_LEVEL_DBFS`` (0 dBFS).
     """
-    check_level(rms_dbfs)
+    check_level(level_dbfs)
     level = level_db(x)
     if not np.isfinite(level):
         return np.array(x, dtype=np.float64), 1.0
-    gain = 10 ** ((rms_dbfs - level) / 20)
+    gain = 10 ** ((level_dbfs - level) / 20)
     return np.asarray(x, dtype=np.float64) * gain, float(gain)
 
 
@@ -301,6 +399,12 @@ class Seam:
         return {key: round(value, 4) if isinstance(value, float) else value
                 for key, value in self.__dict__.items()}
 
+    def __repr__(self) -> str:
+        return (f"Seam(level_jump_db={self.level_jump_db:.3g}, flux_wrap_db="
+                f"{self.flux_wrap_db:.3g} (inside median {self.flux_inside_median_db:.3g}, p95 "
+                f"{self.flux_inside_p95_db:.3g}; percentile {self.flux_wrap_percentile:.0f}), "
+                f"pairs={self.pairs})")
+
 
 def seam_report(loop: np.ndarray, rate: float, edge_ms: float = EDGE_MS,
                 hop_ms: float = HOP_MS, source: object = "loop") -> Seam:
@@ -317,7 +421,8 @@ def seam_report(loop: np.ndarray, rate: float, edge_ms: float = EDGE_MS,
         The :class:`Seam` (figures in dB, the percentile in percent).
 
     Raises:
-        RealPenError: a rate out of range, bad lengths, or a loop shorter than three frames.
+        ParameterError: a rate out of range or bad lengths.
+        RealPenError: a loop shorter than three frames.
     """
     loop = np.asarray(loop, dtype=np.float64)
     check_rate(rate)
@@ -347,7 +452,7 @@ def seam_report(loop: np.ndarray, rate: float, edge_ms: float = EDGE_MS,
                 pairs=int(len(inside)))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False, eq=False)
 class Scan:
     """Scores of every candidate window (arrays of shape (windows,), dB).
 
@@ -362,6 +467,10 @@ class Scan:
     correlation: np.ndarray
     rejected: np.ndarray
     cost: np.ndarray
+
+    def __repr__(self) -> str:
+        return (f"Scan({len(self.starts)} windows, {int(self.rejected.sum())} near silence, "
+                f"best cost {float(np.min(self.cost)):.3g} dB)")
 
 
 def scan_windows(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
@@ -383,12 +492,13 @@ def scan_windows(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
             (about a second of work per 130 s of recording at 48 kHz).
 
     Raises:
-        RealPenError: a rate out of range, bad lengths, a signal shorter than unit + crossfade,
-            silence, or no window clear of near-silence.
+        ParameterError: a rate out of range or bad lengths.
+        RealPenError: a signal shorter than unit + crossfade, silence, or no window clear of
+            near-silence.
     """
     x = np.asarray(x, dtype=np.float64)
     check_rate(rate)
-    for name, value in (("--unit-ms", unit_ms), ("--crossfade-ms", crossfade_ms),
+    for name, value in (("unit_ms", unit_ms), ("crossfade_ms", crossfade_ms),
                         ("hop_ms", hop_ms), ("edge_ms", edge_ms)):
         check_ms(name, value)
     length, fade, edge = (samples_for(unit_ms, rate), samples_for(crossfade_ms, rate),
@@ -442,15 +552,16 @@ def scan_windows(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
 
 def _check_lengths(unit_ms, crossfade_ms, edge_ms, length, fade, edge) -> None:
     if length <= 0:
-        raise RealPenError(f"--unit-ms must be positive, got {unit_ms:g}")
+        raise ParameterError("unit_ms", f"must last at least one sample, got {unit_ms:g}")
     if fade <= 0:
-        raise RealPenError(f"--crossfade-ms must last at least one sample, got {crossfade_ms:g}")
+        raise ParameterError("crossfade_ms", f"must last at least one sample, got "
+                                             f"{crossfade_ms:g}")
     if fade >= length:
-        raise RealPenError(f"--crossfade-ms must be between 0 and the unit length "
-                           f"({unit_ms:g} ms), got {crossfade_ms:g}")
+        raise ParameterError("crossfade_ms", f"must be between 0 and the unit length "
+                                             f"(unit_ms = {unit_ms:g}), got {crossfade_ms:g}")
     if 3 * edge > length:
-        raise RealPenError(f"--unit-ms must be at least {3 * edge_ms:g} ms so head and tail "
-                           f"({edge_ms:g} ms each) can be compared, got {unit_ms:g}")
+        raise ParameterError("unit_ms", f"must be at least {3 * edge_ms:g} ms so head and tail "
+                                        f"({edge_ms:g} ms each) can be compared, got {unit_ms:g}")
 
 
 def _edges(x, rate, starts, length, fade, edge, rho, compensate, floor, progress):
@@ -472,75 +583,230 @@ def _edges(x, rate, starts, length, fade, edge, rho, compensate, floor, progress
     return np.concatenate(head_db), np.concatenate(head_levels), np.concatenate(tail_db)
 
 
-@dataclass(frozen=True)
-class LoopUnit:
-    """A seamless loop unit cut from a recording.
+# --- the one sound-loop type --------------------------------------------------------------------
+
+@dataclass(frozen=True, repr=False, eq=False)
+class SoundLoop:
+    """A sound unit that loops without a seam, and how it was made.
 
     Attributes:
-        samples: the loop, shape (frames,); loops without a seam.
-        rate: rate in Hz.
-        start_s: where the window starts in the recording, in seconds.
-        unit_ms, crossfade_ms: lengths used.
-        scores: the chosen window's scores (dB) and ``cost``.
-        weights: weights of the scores in the cost.
-        correlation: correlation ρ of the two segments blended by the crossfade.
-        seam: the finished loop's seam report.
-        windows: how many windows were scanned; rejected: how many were near silence.
+        samples: the loop, shape (frames,), mono, full scale ±1; it loops from its last sample
+            straight into its first.
+        rate: sample rate in Hz.
+        mode: how it was made: ``"loop"`` (a unit cut from a recording by :func:`find_loop`,
+            or a ready loop read from a file) or ``"granular"`` (a texture of grains,
+            :func:`realpen.sound.granular.granular_loop`).
+        start_s: where the material starts in the recording, in s (the unit's window; the
+            first steady stretch of a texture; a file's ``smpl`` loop start), if known.
+        unit_ms: the unit length asked for in ms (loop mode).
+        crossfade_ms: the wrap crossfade in ms (loop mode; None for a ready loop, whose
+            crossfade is unknown).
+        seam: the finished loop's :class:`Seam` report (None for a loop too short to judge).
+        scores, weights, correlation, windows, rejected: the loop-unit search (loop mode): the
+            chosen window's scores in dB and ``cost``, the weights of the scores, the
+            correlation ρ of the blended segments, windows scanned and near silence.
+        part, grain_ms, seed: granular mode: the steady part the grains came from, the grain
+            length in ms, the seed of the grain offsets.
         gain: linear gain applied to the recording's samples (1 before :meth:`normalised`).
-        source, source_sha256: the recording.
+        source, source_sha256, history: the recording (path, SHA-256, processing steps).
+
+    Example:
+        >>> import numpy as np
+        >>> loop = SoundLoop.from_samples(np.random.default_rng(0).normal(0, 0.1, 4800), 48000)
+        >>> loop.mode, loop.length_ms, round(loop.normalised(-20.0).rms_dbfs, 6)
+        ('loop', 100.0, -20.0)
     """
 
     samples: np.ndarray
     rate: float
-    start_s: float
-    unit_ms: float
-    crossfade_ms: float
-    scores: dict[str, float]
-    weights: dict[str, float]
-    correlation: float
-    seam: Seam
-    windows: int
-    rejected: int
+    mode: str = "loop"
+    start_s: float | None = None
+    unit_ms: float | None = None
+    crossfade_ms: float | None = None
+    seam: Seam | None = None
+    scores: dict[str, float] | None = None
+    weights: dict[str, float] | None = None
+    correlation: float | None = None
+    windows: int | None = None
+    rejected: int | None = None
+    part: SteadyPart | None = None
+    grain_ms: float | None = None
+    seed: int | None = None
     gain: float = 1.0
     source: str | None = None
     source_sha256: str | None = None
-    history: tuple[str, ...] = field(default_factory=tuple)
+    history: tuple[str, ...] = ()
 
-    def normalised(self, rms_dbfs: float = REFERENCE_DBFS) -> "LoopUnit":
-        """A copy scaled to an RMS of ``rms_dbfs`` dBFS (finite, at most 0 dBFS)."""
-        scaled, gain = normalise(self.samples, rms_dbfs)
+    def __post_init__(self) -> None:
+        samples = np.asarray(self.samples, dtype=np.float64)
+        if samples.ndim != 1 or len(samples) == 0:
+            raise ParameterError("samples", f"must be a non-empty mono array of shape (frames,), "
+                                            f"got shape {samples.shape}")
+        if not _is_number(self.rate) or not np.isfinite(self.rate) or self.rate <= 0:
+            raise ParameterError("rate", f"must be a positive number of Hz, got {self.rate!r}")
+        if self.mode not in MODES:
+            raise ParameterError("mode", f"unknown value {self.mode!r} (choose from "
+                                         f"{', '.join(MODES)})")
+        object.__setattr__(self, "samples", samples)
+        object.__setattr__(self, "rate", float(self.rate))
+        object.__setattr__(self, "history", tuple(self.history))
+
+    @classmethod
+    def from_samples(cls, samples: np.ndarray, rate: float, *, start_s: float | None = None,
+                     source: str | None = None, source_sha256: str | None = None,
+                     history: tuple[str, ...] = ()) -> SoundLoop:
+        """A ready loop: ``samples`` (mono, full scale ±1) at ``rate`` Hz, played as they are.
+
+        Its seam is measured when it lasts at least three 20 ms frames (60 ms).
+
+        Args:
+            samples: the loop, shape (frames,).
+            rate: its rate in Hz.
+            start_s: where it starts in its source, in s, if known.
+            source, source_sha256, history: where it came from.
+        """
+        samples = np.asarray(samples, dtype=np.float64)
+        seam = None
+        if _rate_problem(rate) is None and len(samples) >= 3 * samples_for(EDGE_MS, rate):
+            seam = seam_report(samples, rate, source=source or "loop")
+        return cls(samples=samples, rate=rate, mode="loop", start_s=start_s,
+                   unit_ms=len(samples) / float(rate) * 1000, seam=seam, source=source,
+                   source_sha256=source_sha256, history=history)
+
+    @property
+    def frames(self) -> int:
+        """Length in samples."""
+        return int(len(self.samples))
+
+    @property
+    def duration(self) -> float:
+        """Length in s."""
+        return len(self.samples) / self.rate
+
+    @property
+    def length_ms(self) -> float:
+        """Length in ms."""
+        return len(self.samples) / self.rate * 1000
+
+    @property
+    def rms_dbfs(self) -> float:
+        """RMS level in dBFS."""
+        return level_db(self.samples)
+
+    @property
+    def searched(self) -> bool:
+        """Whether the loop was found by the loop-unit search (it has scores)."""
+        return self.scores is not None
+
+    def normalised(self, level_dbfs: float = REFERENCE_DBFS) -> SoundLoop:
+        """A copy scaled to an RMS of ``level_dbfs`` dBFS (finite, at most 0 dBFS)."""
+        scaled, gain = normalise(self.samples, level_dbfs)
         return replace(self, samples=scaled, gain=self.gain * gain)
 
+    def wav_bytes(self) -> bytes:
+        """The loop as a 32-bit float WAV whose ``smpl`` chunk declares it one forward loop."""
+        return wav_bytes(self.samples, int(round(self.rate)), loop=True)
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write :meth:`wav_bytes` to ``path`` atomically."""
+        write_wav(path, self.samples, int(round(self.rate)), loop=True)
+
     def to_json(self) -> dict:
-        """The ``realpen sound loop --json`` document."""
-        return {
+        """The ``realpen sound loop --json`` document (times in s, lengths in ms, levels in dB).
+
+        Both modes give ``mode``, ``source``, ``rate``, ``frames``, ``length_ms``, ``start_s``,
+        ``end_s``, ``seam``, ``gain`` and ``rms_dbfs``; loop mode adds the unit, the crossfade
+        and the search's scores (None for a ready loop), granular mode the steady stretches,
+        the grain length and the seed.
+        """
+        document = {
             "realpen_version": __version__,
-            "mode": "loop",
+            "mode": self.mode,
             "source": {"path": self.source, "sha256": self.source_sha256,
                        "history": list(self.history)},
             "rate": self.rate,
-            "frames": int(len(self.samples)),
-            "start_s": round(self.start_s, 6),
-            "end_s": round(self.start_s + self.unit_ms / 1000, 6),
-            "unit_ms": self.unit_ms,
-            "crossfade_ms": self.crossfade_ms,
-            "crossfade_correlation": round(self.correlation, 4),
-            "scores": {key: round(value, 4) for key, value in self.scores.items()},
-            "weights": self.weights,
-            "windows_scanned": self.windows,
-            "windows_near_silence": self.rejected,
-            "seam": self.seam.to_json(),
-            "gain": self.gain,
-            "rms_dbfs": round(level_db(self.samples), 3),
+            "frames": self.frames,
+            "length_ms": round(self.length_ms, 3),
         }
+        if self.mode == "granular" and self.part is not None:
+            stretches = [[round(a / self.rate, 6), round(b / self.rate, 6)]
+                         for a, b in self.part.stretches]
+            document.update({
+                "start_s": stretches[0][0],
+                "end_s": stretches[-1][1],
+                "steady_stretches_s": stretches,
+                "steady_s": round(sum(b - a for a, b in self.part.stretches) / self.rate, 6),
+                "grain_ms": self.grain_ms,
+                "seed": self.seed,
+            })
+        else:
+            start = None if self.start_s is None else round(self.start_s, 6)
+            unit_ms = self.unit_ms if self.unit_ms is not None else self.length_ms
+            document.update({
+                "start_s": start,
+                "end_s": None if start is None else round(self.start_s + unit_ms / 1000, 6),
+                "unit_ms": unit_ms,
+                "crossfade_ms": self.crossfade_ms,
+                "crossfade_correlation": (None if self.correlation is None
+                                          else round(self.correlation, 4)),
+                "scores": (None if self.scores is None
+                           else {key: round(value, 4) for key, value in self.scores.items()}),
+                "weights": self.weights,
+                "windows_scanned": self.windows,
+                "windows_near_silence": self.rejected,
+            })
+            if self.mode == "granular":  # a texture built elsewhere, without its steady part
+                document.update({"grain_ms": self.grain_ms, "seed": self.seed})
+        document.update({
+            "seam": None if self.seam is None else self.seam.to_json(),
+            "gain": self.gain,
+            "rms_dbfs": round(self.rms_dbfs, 3),
+        })
+        return document
+
+    def __repr__(self) -> str:
+        where = "" if self.start_s is None else f", start_s={self.start_s:.3f}"
+        seam = "" if self.seam is None else f", seam jump {self.seam.level_jump_db:.2f} dB"
+        name = Path(self.source).name if self.source else None
+        source = "" if name is None else f", source={name[:40]!r}"
+        return (f"SoundLoop(mode={self.mode!r}, {self.length_ms:.1f} ms at {self.rate:g} Hz"
+                f"{where}, rms {self.rms_dbfs:.1f} dBFS{seam}{source})")
+
+
+def _mono(sound, rate: float | None, source: object | None
+          ) -> tuple[np.ndarray, float, Recording | None, object]:
+    """(mono samples, rate in Hz, the recording if any, the source's name) of a recording or an
+    array; a recording is mixed down and, when ``rate`` differs from its own, resampled."""
+    if isinstance(sound, Recording):
+        recording = sound
+        channels = recording.samples.shape[1]
+        if channels > 1:
+            recording = recording.with_samples(recording.samples.mean(axis=1)[:, None],
+                                               f"mixdown:{channels}ch", axes=("mono",))
+        if rate is not None:
+            check_rate(rate)
+            recording = resample(recording, float(rate))
+        name = recording.source if source is None else source
+        _check_source_rate(recording.rate, name)
+        return recording.mono, float(recording.rate), recording, name
+    x = np.asarray(sound, dtype=np.float64)
+    if x.ndim == 2:
+        x = x.mean(axis=1)
+    if x.ndim != 1:
+        raise ParameterError("sound", f"must be samples of shape (frames,) or (frames, "
+                                      f"channels), got shape {x.shape}")
+    if rate is None:
+        raise ParameterError("rate", "needed in Hz for an array of samples")
+    return x, check_rate(rate), None, "signal" if source is None else source
 
 
 def find_loop_unit(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
                    crossfade_ms: float = CROSSFADE_MS, hop_ms: float = HOP_MS,
                    compensate: bool = True, source: object = "signal",
                    recording: Recording | None = None,
-                   progress: ProgressCallback | None = None) -> LoopUnit:
-    """Find the best loop unit of a mono signal and make its wrap seamless.
+                   progress: ProgressCallback | None = None) -> SoundLoop:
+    """Find the best loop unit of a mono signal and make its wrap seamless (the search itself;
+    :func:`find_loop` is the friendlier entry).
 
     Args:
         x: the recording, shape (frames,), full scale ±1.
@@ -554,12 +820,8 @@ def find_loop_unit(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
         progress: called as ``progress(done, total)`` while windows are scored.
 
     Returns:
-        The :class:`LoopUnit` (not normalised; see :meth:`LoopUnit.normalised`).
-
-    Example:
-        >>> unit = find_loop_unit(load_sound("rough_paper.wav").mono, 48000)
-        >>> unit.seam.level_jump_db < 1
-        True
+        The :class:`SoundLoop` (``mode="loop"``; not normalised, see
+        :meth:`SoundLoop.normalised`).
     """
     scan = scan_windows(x, rate, unit_ms, crossfade_ms, hop_ms, compensate=compensate,
                         source=source, progress=progress)
@@ -569,10 +831,64 @@ def find_loop_unit(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
                           compensate)
     names = ("level_jump_db", "spectral_db", "stationarity_db", "quietness_db", "cost")
     scores = {name: float(getattr(scan, name)[best]) for name in names}
-    return LoopUnit(samples=loop, rate=float(rate), start_s=start / rate, unit_ms=float(unit_ms),
-                    crossfade_ms=float(crossfade_ms), scores=scores, weights=dict(WEIGHTS),
-                    correlation=float(rho), seam=seam_report(loop, rate, source=source),
-                    windows=int(len(scan.starts)), rejected=int(scan.rejected.sum()),
-                    source=recording.source if recording else None,
-                    source_sha256=recording.sha256 if recording else None,
-                    history=recording.history if recording else ())
+    return SoundLoop(samples=loop, rate=float(rate), mode="loop", start_s=start / rate,
+                     unit_ms=float(unit_ms), crossfade_ms=float(crossfade_ms), scores=scores,
+                     weights=dict(WEIGHTS), correlation=float(rho),
+                     seam=seam_report(loop, rate, source=source),
+                     windows=int(len(scan.starts)), rejected=int(scan.rejected.sum()),
+                     source=recording.source if recording else None,
+                     source_sha256=recording.sha256 if recording else None,
+                     history=recording.history if recording else ())
+
+
+def find_loop(sound: Recording | np.ndarray | SoundLoop | str | os.PathLike, *,
+              rate: float | None = None, unit_ms: float = UNIT_MS,
+              crossfade_ms: float = CROSSFADE_MS, hop_ms: float = HOP_MS,
+              compensate: bool = True, level_dbfs: float | None = None,
+              source: object | None = None,
+              progress: ProgressCallback | None = None) -> SoundLoop:
+    """The seamless loop unit of a friction sound; see the module doc for how it is chosen.
+
+    Args:
+        sound: a recording (:class:`~realpen.io.recording.Recording`, mixed down when it has
+            several channels), an array of samples (frames,) or (frames, channels) with
+            ``rate``, or the path of an audio file (read by :func:`load_sound`). A
+            :class:`SoundLoop`, or a file that declares its loop in a ``smpl`` chunk, is
+            already a loop and comes back as it is.
+        rate: the array's rate in Hz; for a recording, resample to this rate first (None keeps
+            its own); for a path, the rate to load at (None: 48 kHz). 8 kHz to 384 kHz.
+        unit_ms: loop length in ms (default 300).
+        crossfade_ms: crossfade at the wrap in ms (default 10), shorter than the unit.
+        hop_ms: scan step in ms (default 5).
+        compensate: correlation-compensated crossfade (see the module doc).
+        level_dbfs: scale the loop to this RMS in dBFS (at most 0); None keeps the recording's
+            level.
+        source: names the sound in error messages (default: the recording's file).
+        progress: called as ``progress(done, total)`` while windows are scored.
+
+    Returns:
+        The :class:`SoundLoop` (``mode="loop"``) with its scores and seam.
+
+    Raises:
+        ParameterError: a bad rate, length or level.
+        RealPenError: a recording that is silent, too short for the unit plus the crossfade,
+            or has no window clear of near silence.
+
+    Example:
+        >>> import numpy as np
+        >>> noise = np.random.default_rng(0).normal(0, 0.1, 48000)
+        >>> loop = find_loop(noise, rate=48000)
+        >>> loop.frames, loop.seam.level_jump_db < 1
+        (14400, True)
+    """
+    if level_dbfs is not None:
+        check_level(level_dbfs)
+    if isinstance(sound, (str, os.PathLike)):
+        sound = load_sound(sound, DEFAULT_RATE if rate is None else rate)
+        rate = None
+    if isinstance(sound, SoundLoop):
+        return sound if level_dbfs is None else sound.normalised(level_dbfs)
+    x, rate, recording, name = _mono(sound, rate, source)
+    loop = find_loop_unit(x, rate, unit_ms, crossfade_ms, hop_ms, compensate, source=name,
+                          recording=recording, progress=progress)
+    return loop if level_dbfs is None else loop.normalised(level_dbfs)

@@ -18,43 +18,76 @@ its meter only at pointer-down: if a pen reports pressure 0 in the middle of a s
 keeps measuring through it while this reading restarts. The gain there is 0 either way; only
 the speed of the next 20 ms after it can differ.)
 
-The sound is either a loop unit read cyclically at the playback rate (``mode="loop"``) or grains
+The sound is either a loop read cyclically at the playback rate (``mode="loop"``) or grains
 from the recording's steady part (``mode="granular"``). Either is scaled so the steady sound has
-an RMS of ``level_dbfs`` (gain 1 plays at that level). In loop mode the recording is searched
-for its loop unit (it must last at least the unit plus the crossfade) unless it is declared a
-ready loop (``find_unit=False``, the command line's ``--as-loop``), which is played as it is.
+an RMS of ``level_dbfs`` (gain 1 plays at that level). In loop mode a recording is searched for
+its loop unit (it must last at least the unit plus the crossfade); a
+:class:`~realpen.sound.loop.SoundLoop` (e.g. a WAV whose ``smpl`` chunk declares its loop, read
+by :func:`~realpen.sound.loop.load_sound`) is played as it is, and so is any sound declared a
+ready loop with ``find_unit=False``.
+
+A trajectory's columns and value ranges are those of the one stroke-sample definition,
+:class:`realpen.io.strokes.StrokeSample` (``t`` s, ``x`` and ``y`` mm, ``pressure`` 0–1, tilt in
+degrees); :class:`Trajectory` is its columnar form, and converts to and from a list of samples.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Sequence
+from pathlib import Path
 
 import numpy as np
 
+from realpen.errors import ParameterError, fail
+from realpen.io.csvtable import read_csv
+from realpen.io.recording import Recording
+from realpen.io.strokes import (
+    POSITION_RANGE_MM,
+    PRESSURE_RANGE,
+    TILT_RANGE_DEG,
+    TRAJECTORY_FIELDS,
+    StrokeSample,
+)
 from realpen.sound.coupling import Coupling
-from realpen.io.csvtable import read_table
-from realpen.errors import RealPenError, fail
-from realpen.sound.granular import GRAIN_MS, SteadyPart, granular, grain_samples, steady_part
-from realpen.sound.loop import (CROSSFADE_MS, REFERENCE_DBFS, UNIT_MS, LoopUnit, ProgressCallback,
-                    check_level, check_ms, check_rate, find_loop_unit, normalise, require_sound,
-                    samples_for)
+from realpen.sound.granular import GRAIN_MS, SteadyPart, grain_samples, granular, steady_part
+from realpen.sound.loop import (
+    CROSSFADE_MS,
+    MODES,
+    REFERENCE_DBFS,
+    UNIT_MS,
+    ProgressCallback,
+    SoundLoop,
+    _mono,
+    check_level,
+    check_ms,
+    check_rate,
+    find_loop_unit,
+    normalise,
+    require_sound,
+    samples_for,
+)
 
-MODES = ("loop", "granular")
+__all__ = ["Trajectory", "Rendered", "load_trajectory", "control_signals", "render_stroke",
+           "MODES", "MAX_DURATION_S", "SPEED_WINDOW_MS", "TILT_FIELDS"]
+
 MAX_DURATION_S = 600.0  # longer usually means t was given in ms
 SPEED_WINDOW_MS = 20.0  # the live page's speed window (SPEED_WINDOW_MS in live/static/pen.js)
+TILT_FIELDS = ("tilt_x", "tilt_y")  # optional trajectory columns, degrees
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False, eq=False)
 class Trajectory:
-    """A pen trajectory: one row per pen event.
+    """A pen trajectory: one row per pen event, the columnar form of
+    :class:`~realpen.io.strokes.StrokeSample` rows.
 
     Attributes:
         t: time in s, strictly increasing.
         x, y: position in mm.
         pressure: normalised pressure 0–1; 0 means the pen is lifted.
         source: where it came from.
+        tilt_x, tilt_y: tilt in degrees (−90–90), when known (None: not recorded).
     """
 
     t: np.ndarray
@@ -62,30 +95,39 @@ class Trajectory:
     y: np.ndarray
     pressure: np.ndarray
     source: str = "trajectory"
+    tilt_x: np.ndarray | None = None
+    tilt_y: np.ndarray | None = None
 
     @classmethod
     def checked(cls, t, x, y, pressure, source: object = "trajectory",
-                lines: Sequence[int] | None = None) -> "Trajectory":
+                lines: Sequence[int] | None = None, *, tilt_x=None, tilt_y=None) -> Trajectory:
         """Build a trajectory, raising :class:`RealPenError` naming ``source`` on bad data.
+
+        The value ranges are the stroke sample's (:mod:`realpen.io.strokes`).
 
         Args:
             t: time in s; x, y: position in mm; pressure: normalised, 0–1.
             source: names the data in error messages.
             lines: the file line of each row (1-based), when the rows come from a file:
                 errors then name the line; otherwise they name the row (1-based).
+            tilt_x, tilt_y: tilt in degrees (−90–90), optional.
         """
         t, x, y, pressure = (np.asarray(a, dtype=np.float64).ravel() for a in (t, x, y, pressure))
-        if not len(t) == len(x) == len(y) == len(pressure):
-            raise fail(source, "t, x, y and pressure differ in length")
+        tilts = {name: None if value is None else np.asarray(value, dtype=np.float64).ravel()
+                 for name, value in zip(TILT_FIELDS, (tilt_x, tilt_y))}
+        columns = {"t": t, "x": x, "y": y, "pressure": pressure,
+                   **{name: value for name, value in tilts.items() if value is not None}}
+        if len({len(values) for values in columns.values()}) > 1:
+            raise fail(source, f"{', '.join(columns)} differ in length")
         if lines is not None and len(lines) != len(t):
-            raise ValueError("one line number per row is needed")
+            raise ParameterError("lines", "one line number per row is needed")
 
         def where(row: int) -> str:
             return f"line {lines[row]}" if lines is not None else f"row {row + 1}"
 
         if len(t) < 2:
             raise fail(source, f"a trajectory needs at least 2 rows, has {len(t)}")
-        for name, values in (("t", t), ("x", x), ("y", y), ("pressure", pressure)):
+        for name, values in columns.items():
             bad = np.flatnonzero(~np.isfinite(values))
             if len(bad):
                 raise fail(source, f"{where(bad[0])}: {name} is {values[bad[0]]:g} (NaN or "
@@ -95,19 +137,65 @@ class Trajectory:
             row = steps[0] + 1
             raise fail(source, f"{where(row)}: t = {t[row]:g} s comes after {t[row - 1]:g} s "
                                f"({where(row - 1)}); t must increase strictly")
-        outside = np.flatnonzero((pressure < 0) | (pressure > 1))
+        low, high = PRESSURE_RANGE
+        outside = np.flatnonzero((pressure < low) | (pressure > high))
         if len(outside):
             raise fail(source, f"{where(outside[0])}: pressure {pressure[outside[0]]:g} must be "
-                               f"between 0 and 1")
+                               f"between {low:g} and {high:g}")
+        ranges = [("x", POSITION_RANGE_MM, "mm"), ("y", POSITION_RANGE_MM, "mm")]
+        ranges += [(name, TILT_RANGE_DEG, "degrees") for name in tilts if tilts[name] is not None]
+        for name, (low, high), unit in ranges:
+            values = columns[name]
+            outside = np.flatnonzero((values < low) | (values > high))
+            if len(outside):
+                raise fail(source, f"{where(outside[0])}: {name} = {values[outside[0]]:g} {unit} "
+                                   f"must be between {low:g} and {high:g}")
         if t[-1] - t[0] > MAX_DURATION_S:
             raise fail(source, f"lasts {t[-1] - t[0]:g} s, more than {MAX_DURATION_S:g} s "
                                f"(t must be in seconds)")
-        return cls(t, x, y, pressure, str(source))
+        return cls(t, x, y, pressure, str(source), tilts["tilt_x"], tilts["tilt_y"])
+
+    @classmethod
+    def from_samples(cls, samples: Iterable[StrokeSample],
+                     source: object = "samples") -> Trajectory:
+        """The trajectory of stroke samples (their ``t``, ``x``, ``y``, ``pressure`` and tilt;
+        speed is measured again by :meth:`speed`).
+
+        Args:
+            samples: :class:`~realpen.io.strokes.StrokeSample` rows, ``t`` in s increasing.
+            source: names them in error messages.
+        """
+        rows = np.array([sample.as_row() for sample in samples], dtype=np.float64)
+        if rows.size == 0:
+            raise fail(source, "a trajectory needs at least 2 rows, has 0")
+        t, x, y, pressure, tilt_x, tilt_y, _ = rows.T
+        return cls.checked(t, x, y, pressure, source, tilt_x=tilt_x, tilt_y=tilt_y)
+
+    def to_samples(self, window_ms: float = SPEED_WINDOW_MS) -> list[StrokeSample]:
+        """The rows as :class:`~realpen.io.strokes.StrokeSample` (speed in mm/s from
+        :meth:`speed` over ``window_ms`` ms; tilt 0 degrees where not recorded)."""
+        speed = self.speed(window_ms)
+        zeros = np.zeros(len(self.t))
+        tilt_x = self.tilt_x if self.tilt_x is not None else zeros
+        tilt_y = self.tilt_y if self.tilt_y is not None else zeros
+        return [StrokeSample(t=float(a), x=float(b), y=float(c), pressure=float(p),
+                             tilt_x=float(tx), tilt_y=float(ty), speed=float(v))
+                for a, b, c, p, tx, ty, v in zip(self.t, self.x, self.y, self.pressure,
+                                                 tilt_x, tilt_y, speed)]
 
     @property
     def duration_s(self) -> float:
         """Time from the first to the last event, in s."""
         return float(self.t[-1] - self.t[0])
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def __repr__(self) -> str:
+        down = float(np.mean(self.pressure > 0)) * 100 if len(self.t) else 0.0
+        name = Path(self.source).name[:40]
+        return (f"Trajectory({len(self.t)} events over {self.duration_s:.3g} s, pen down "
+                f"{down:.0f} %, source={name!r})")
 
     def speed(self, window_ms: float = SPEED_WINDOW_MS) -> np.ndarray:
         """Causal pen speed at each event in mm/s, as the live page measures it.
@@ -141,13 +229,21 @@ class Trajectory:
 def load_trajectory(path: str | os.PathLike) -> Trajectory:
     """Load a trajectory CSV with the header ``t,x,y,pressure`` (s, mm, mm, 0–1).
 
+    Other columns are allowed (e.g. those of ``realpen strokes export``); ``tilt_x`` and
+    ``tilt_y`` (degrees), when present, are read too.
+
     Raises:
         RealPenError: any problem with the file (see :meth:`Trajectory.checked`).
     """
-    table = read_table(path, ("t", "x", "y", "pressure"), min_rows=2)
+    table = read_csv(path, TRAJECTORY_FIELDS, min_rows=2)
+    header = {name.strip().lower() for name in table.header or ()}
+    tilts = [name for name in TILT_FIELDS if name in header]
+    if tilts:
+        table = read_csv(path, TRAJECTORY_FIELDS + tuple(tilts), min_rows=2)
     columns = table.columns
     return Trajectory.checked(columns["t"], columns["x"], columns["y"], columns["pressure"], path,
-                              lines=table.lines)
+                              lines=table.lines, tilt_x=columns.get("tilt_x"),
+                              tilt_y=columns.get("tilt_y"))
 
 
 def control_signals(trajectory: Trajectory, coupling: Coupling,
@@ -178,7 +274,7 @@ def control_signals(trajectory: Trajectory, coupling: Coupling,
             coupling.smooth(rates, rate, initial=float(rates[0])))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False, eq=False)
 class Rendered:
     """A rendered stroke.
 
@@ -186,9 +282,11 @@ class Rendered:
         samples: the sound, shape (frames,), full scale ±1 (float; may exceed 1 at high gain).
         rate: rate in Hz.
         mode: ``"loop"`` or ``"granular"``.
-        target_gain, gain, playback_rate: the control signals (per sample).
+        target_gain, gain, playback_rate: the control signals (per sample; gains linear,
+            playback rate in source samples per output sample).
         unit: the loop unit found in the recording, if one was searched for.
         part: the steady part the grains came from (granular mode).
+        loop: the loop that was played (loop mode): the unit found, or the ready loop.
     """
 
     samples: np.ndarray
@@ -197,61 +295,88 @@ class Rendered:
     target_gain: np.ndarray
     gain: np.ndarray
     playback_rate: np.ndarray
-    unit: LoopUnit | None = None
+    unit: SoundLoop | None = None
     part: SteadyPart | None = None
+    loop: SoundLoop | None = None
+
+    def __repr__(self) -> str:
+        return (f"Rendered({len(self.samples) / self.rate:.3g} s at {self.rate:g} Hz, "
+                f"mode={self.mode!r}, peak gain {float(np.max(self.gain, initial=0)):.3g})")
 
 
-def render_stroke(sound: np.ndarray, rate: float, trajectory: Trajectory,
-                  coupling: Coupling | None = None, mode: str = "loop", *,
-                  find_unit: bool = True, unit_ms: float = UNIT_MS,
+def render_stroke(sound: np.ndarray | Recording | SoundLoop, rate: float | None,
+                  trajectory: Trajectory, coupling: Coupling | None = None, mode: str = "loop",
+                  *, find_unit: bool = True, unit_ms: float = UNIT_MS,
                   crossfade_ms: float = CROSSFADE_MS, grain_ms: float = GRAIN_MS,
                   seed: int = 0, level_dbfs: float = REFERENCE_DBFS,
-                  source: object = "sound", progress: ProgressCallback | None = None) -> Rendered:
+                  source: object | None = None,
+                  progress: ProgressCallback | None = None) -> Rendered:
     """Render the friction sound of a stroke.
 
     Args:
-        sound: a recording (or, with ``find_unit=False``, a ready loop), mono, full scale ±1,
-            at ``rate`` Hz.
-        rate: its rate in Hz (also the output rate), 8 kHz to 384 kHz.
+        sound: a recording (an array, mono or (frames, channels), full scale ±1, at ``rate``
+            Hz, or a :class:`~realpen.io.recording.Recording`), or a
+            :class:`~realpen.sound.loop.SoundLoop`, which loop mode plays as it is.
+        rate: the array's rate in Hz (also the output rate), 8 kHz to 384 kHz; for a
+            recording or a sound loop None (their own rate) or that same rate.
         trajectory: the stroke.
         coupling: Eq. 1 parameters (default :class:`Coupling`).
         mode: ``"loop"`` or ``"granular"``.
-        find_unit: loop mode: search the recording for its loop unit (default; the recording
-            must last at least ``unit_ms + crossfade_ms``), or False to play ``sound`` as it is
-            as a ready loop (e.g. a WAV written by ``realpen sound loop``).
+        find_unit: loop mode with a recording: search it for its loop unit (default; the
+            recording must last at least ``unit_ms + crossfade_ms``), or False to play it as
+            it is as a ready loop. A :class:`~realpen.sound.loop.SoundLoop` is always played
+            as it is.
         unit_ms, crossfade_ms: loop-unit length and wrap crossfade in ms (finite, positive).
         grain_ms: granular grain length in ms (finite, positive); seed: seed of its offsets.
-        level_dbfs: RMS in dB re full scale that gain 1 plays the steady sound at (finite,
-            at most 0 dBFS).
-        source: names the sound in error messages.
+        level_dbfs: RMS in dB re full scale (dBFS) that gain 1 plays the steady sound at
+            (finite, at most 0 dBFS).
+        source: names the sound in error messages (default: its file, or ``"sound"``).
         progress: passed to the loop-unit search.
 
     Raises:
-        RealPenError: a bad mode, rate, length or level, silence, or a sound too short for the
-            unit or the grains.
+        ParameterError: a bad mode, rate, length or level; ``find_unit`` for a recording shorter
+            than the unit plus the crossfade (the message names the sound).
+        RealPenError: silence, or a sound too short for the grains.
     """
     coupling = coupling or Coupling()
     if mode not in MODES:
-        raise RealPenError(f"--mode: unknown mode '{mode}' (choose from {', '.join(MODES)})")
-    check_rate(rate)
-    for name, value in (("--unit-ms", unit_ms), ("--crossfade-ms", crossfade_ms),
-                        ("--grain-ms", grain_ms)):
+        raise ParameterError("mode", f"unknown value {mode!r} (choose from {', '.join(MODES)})")
+    if rate is not None:
+        check_rate(rate)
+    for name, value in (("unit_ms", unit_ms), ("crossfade_ms", crossfade_ms),
+                        ("grain_ms", grain_ms)):
         check_ms(name, value)
     check_level(level_dbfs)
-    sound = np.asarray(sound, dtype=np.float64)
+    ready = None
+    if isinstance(sound, SoundLoop):
+        if rate is not None and abs(float(rate) - sound.rate) > 1e-9:
+            raise ParameterError("rate", f"a sound loop plays at its own rate "
+                                         f"({sound.rate:g} Hz), got {rate:g}")
+        rate = check_rate(sound.rate)
+        source = source if source is not None else sound.source or "sound loop"
+        ready = sound
+        sound = sound.samples
+    else:
+        sound, rate, _, source = _mono(sound, rate, source)
+        if source == "signal":
+            source = "sound"
     require_sound(sound, source)
     needed = samples_for(unit_ms, rate) + samples_for(crossfade_ms, rate)
-    if mode == "loop" and find_unit and len(sound) < needed:
-        raise fail(source, f"lasts {len(sound) / rate * 1000:.0f} ms, shorter than the "
-                           f"{unit_ms:g} ms unit plus the {crossfade_ms:g} ms crossfade it is "
-                           f"searched for (give --as-loop to play the file as a ready loop)")
+    search = mode == "loop" and ready is None and find_unit
+    if search and len(sound) < needed:
+        # find_unit=True asks for a search this sound cannot hold: the argument is what to change
+        raise ParameterError("find_unit", f"{source} lasts {len(sound) / rate * 1000:.0f} ms, "
+                                          f"shorter than the {unit_ms:g} ms unit plus the "
+                                          f"{crossfade_ms:g} ms crossfade it is searched for; "
+                                          f"play it as it is, as a ready loop")
     target, gain, playback = control_signals(trajectory, coupling, rate)
-    unit = part = None
+    unit = part = played = None
     if mode == "loop":
-        if find_unit:
+        if search:
             unit = find_loop_unit(sound, rate, unit_ms, crossfade_ms, source=source,
                                   progress=progress)
-        loop, _ = normalise(unit.samples if unit else sound, level_dbfs)
+        played = unit or ready or SoundLoop(samples=sound, rate=rate, source=str(source))
+        loop, _ = normalise(played.samples, level_dbfs)
         carrier = _read_cyclic(loop, playback)
     else:
         grain = grain_samples(grain_ms, rate)
@@ -260,7 +385,7 @@ def render_stroke(sound: np.ndarray, rate: float, trajectory: Trajectory,
         carrier = granular(sound, rate, len(gain), part, grain_ms, seed, playback_rate=playback)
         carrier *= 10 ** (level_dbfs / 20) / part.rms
     return Rendered(samples=gain * carrier, rate=float(rate), mode=mode, target_gain=target,
-                    gain=gain, playback_rate=playback, unit=unit, part=part)
+                    gain=gain, playback_rate=playback, unit=unit, part=part, loop=played)
 
 
 def _read_cyclic(loop: np.ndarray, playback: np.ndarray) -> np.ndarray:

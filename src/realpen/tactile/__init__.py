@@ -1,8 +1,39 @@
 """Tactile feedback: the actuator, the tactile pattern, its synthesis and the study conditions.
 
-Lives here: :mod:`~realpen.tactile.actuator` (the one :class:`Actuator` type and the weighting
-w(f) ∝ 1/|H(f)|), :mod:`~realpen.tactile.pattern` (the one :class:`TactilePattern` type, its
-parameters, the study conditions A–F and the pipeline that builds it).
+Lives here:
 
-May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.dsp`.
+- :mod:`~realpen.tactile.actuator` — the one :class:`Actuator` type (model or measured
+  response |H(f)|) and the equalising weighting w(f) ∝ 1/|H(f)|;
+- :mod:`~realpen.tactile.pattern` — the one :class:`TactilePattern` type and its
+  :class:`Component` sinusoids (what ``profile.json`` stores and every export reads);
+- :mod:`~realpen.tactile.synthesis` — superposition per sub-pattern and the crossfades;
+- :mod:`~realpen.tactile.conditions` — :class:`TactileParams` and the study conditions A–F;
+- :mod:`~realpen.tactile.build` — the pipeline from a recording to a pattern
+  (:func:`build_pattern`, :func:`tactile_pattern`).
+
+May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.dsp` (only ``build`` does;
+the types, synthesis and conditions need numpy alone, so the profile schema stays light). This
+``__init__`` imports nothing until a name is used.
 """
+
+from __future__ import annotations
+
+import importlib
+
+__all__ = ["Actuator", "parse_actuator", "weighting", "Component", "TactilePattern",
+           "synthesize", "TactileParams", "CONDITIONS", "build_pattern", "tactile_pattern"]
+
+_HOMES = {"Actuator": "actuator", "parse_actuator": "actuator", "weighting": "actuator",
+          "Component": "pattern", "TactilePattern": "pattern", "synthesize": "synthesis",
+          "TactileParams": "conditions", "CONDITIONS": "conditions",
+          "build_pattern": "build", "tactile_pattern": "build"}
+
+
+def __getattr__(name: str):
+    if name in _HOMES:
+        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -1,327 +1,431 @@
-"""Tactile pattern synthesis: principal frequencies → equalised, superposed, looping pattern.
+"""The one tactile-pattern type: :class:`TactilePattern` made of :class:`Component` sinusoids.
 
-Per sub-pattern (one selected unit sequence) one sinusoid is superposed per principal
-frequency, with amplitude ∝ √(power ratio) × w(f) (energy-preserving; ``amplitude="power"`` is
-the literal reading, ∝ power ratio × w(f)) and a seeded random phase, which keeps the crest
-factor low. A frequency that persists into the next sub-pattern keeps its phase there
-(see :mod:`realpen.tracks`), so crossfades never make it dip. The power ratio is the component's share of its own sub-pattern's total, so every
-sub-pattern carries the same total level and the fluctuation lies in its frequency content.
+A tactile pattern is a loop of sub-patterns (15 × 100 ms for the method's condition B), each a
+superposition of sinusoids ``a·sin(2πf·t + φ)``, joined by crossfades (or hard boundaries).
+That description — the components per sub-pattern, the rate, the sub-pattern length and the
+boundary — *is* the pattern: :meth:`TactilePattern.render` synthesises it at any rate,
+:attr:`TactilePattern.samples` is the rendering at its own rate, ``profile.json`` stores exactly
+these fields (:meth:`TactilePattern.to_json`), and every export reads them.
 
-Sub-patterns follow each other (15 × 100 ms = 1500 ms by default) and the pattern loops. With
-``boundary="crossfade"`` each sub-pattern is synthesised ``crossfade_ms`` longer and neighbours
-(the last and the first included, across the loop wrap) overlap — continuing components with a
-linear fade, the others with an equal-power fade — so the loop has no click; ``boundary="hard"`` concatenates, as the method describes literally.
+A pattern built from a recording (:func:`realpen.tactile.build.build_pattern`) also carries
+where it came from: the actuator it is equalised for, the parameters, the analysis and the
+source's provenance. Those are not part of its identity (equality and :attr:`version` look at
+the components and lengths only).
+
+Versions are SHA-256 hashes of a canonical JSON form (:func:`canonical_json`: floats rounded to
+9 significant digits, keys sorted, compact), so the same pattern has the same version on every
+machine even when the last bits of its floats differ.
+
+numpy only: this module is imported by the profile schema.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from realpen import __version__
-from realpen.tactile.actuator import Actuator, weighting
-from realpen.errors import RealPenError, require_number
-from realpen.io.recording import Recording
-from realpen.dsp.filters import prepare
-from realpen.dsp.spectrum import Analysis, ProgressCallback, analyze
-from realpen.dsp.tracks import continuous_phases, joins, link_components
+from realpen.errors import ParameterError, require_choice, require_number
+from realpen.tactile.actuator import Actuator
+from realpen.tactile.conditions import TactileParams
+from realpen.tactile.synthesis import BOUNDARIES, subpattern_samples, synthesize
 
-# Study 1 conditions: (principal frequencies, sub-patterns, unit length in ms).
-CONDITIONS: dict[str, tuple[int, int, float]] = {
-    "A": (5, 15, 100.0), "B": (10, 15, 100.0), "C": (15, 15, 100.0),
-    "D": (5, 1, 1500.0), "E": (10, 1, 1500.0), "F": (15, 1, 1500.0),
-}
-BOUNDARIES = ("crossfade", "hard")
-AMPLITUDE_MODES = ("sqrt", "power")
+if TYPE_CHECKING:
+    from realpen.dsp.spectrum import Analysis
+
+__all__ = ["Component", "TactilePattern", "canonical_json", "content_version", "json_fields",
+           "SIGNIFICANT_DIGITS", "MAX_SUBPATTERN_MS"]
+
+SIGNIFICANT_DIGITS = 9
+MAX_SUBPATTERN_MS = 60_000.0
+NOT_JSON = {"json": False}  # field metadata: not stored in profile.json
 
 
-@dataclass(frozen=True)
-class TactileParams:
-    """Every parameter of the tactile pipeline (defaults: the method's condition B).
+def _canonical(value: Any) -> Any:
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return value
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParameterError("value", f"{value} has no canonical JSON form")
+        return float(f"{value:.{SIGNIFICANT_DIGITS}g}") + 0.0  # + 0.0: no negative zero
+    if isinstance(value, dict):
+        return {str(key): _canonical(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_canonical(item) for item in value]
+    raise ParameterError("value", f"{type(value).__name__} has no canonical JSON form")
 
-    Attributes:
-        top: principal frequencies per sub-pattern (N).
-        subpatterns: consecutive units in the pattern (K).
-        unit_ms: unit (and sub-pattern) length in ms.
-        rate: output rate in Hz.
-        boundary: ``"crossfade"`` or ``"hard"``.
-        crossfade_ms: crossfade length at each boundary and at the loop wrap, in ms.
-        amplitude: ``"sqrt"`` (∝ √power ratio) or ``"power"`` (∝ power ratio).
-        seed: seed of the random phases.
-        cap_db: cap of the actuator weighting in dB.
-        headroom_db: peak level below full scale after normalisation, in dB.
-        selection: ``"stationary"`` or ``"middle"`` (which consecutive units).
-        highpass_hz: high-pass cutoff in Hz; also the lower edge of the peak band.
-        fmax_hz: upper edge of the peak band in Hz (None: Nyquist of the analysis rate).
-        axis: how axes become one (None: DFT321 for several axes).
-        analysis_rate: resample to this rate in Hz before analysis (None: native rate).
-        condition: the study condition the counts came from, if any.
+
+def canonical_json(value: Any) -> bytes:
+    """The canonical JSON bytes of a JSON-ready value, for hashing.
+
+    Every float is rounded to :data:`SIGNIFICANT_DIGITS` (9) significant digits (and −0.0
+    becomes 0.0), keys are sorted, separators are compact, text is UTF-8. Floats that differ
+    only in their last bits (numpy/scipy versions, CPUs) therefore give the same bytes.
+
+    Example:
+        >>> canonical_json({"b": 270.28028653691086, "a": [1, True]})
+        b'{"a":[1,true],"b":270.280287}'
     """
-
-    top: int = 10
-    subpatterns: int = 15
-    unit_ms: float = 100.0
-    rate: int = 8000
-    boundary: str = "crossfade"
-    crossfade_ms: float = 5.0
-    amplitude: str = "sqrt"
-    seed: int = 0
-    cap_db: float = 20.0
-    headroom_db: float = 1.0
-    selection: str = "stationary"
-    highpass_hz: float = 30.0
-    fmax_hz: float | None = None
-    axis: str | None = None
-    analysis_rate: float | None = None
-    condition: str | None = None
-
-    def __post_init__(self) -> None:
-        if self.boundary not in BOUNDARIES:
-            raise RealPenError(f"--boundary: unknown boundary '{self.boundary}' "
-                               f"(choose from {', '.join(BOUNDARIES)})")
-        if self.amplitude not in AMPLITUDE_MODES:
-            raise RealPenError(f"--amplitude: unknown mode '{self.amplitude}' "
-                               f"(choose from {', '.join(AMPLITUDE_MODES)})")
-        require_number("--unit-ms", self.unit_ms, minimum=0.0, inclusive=False)
-        require_number("--top", self.top, minimum=1)
-        require_number("--subpatterns", self.subpatterns, minimum=1)
-        require_number("--rate", self.rate, minimum=0, inclusive=False)
-        require_number("--crossfade-ms", self.crossfade_ms, minimum=0.0, maximum=self.unit_ms)
-        require_number("--cap-db", self.cap_db, minimum=0.0)
-        require_number("--headroom-db", self.headroom_db, minimum=0.0)
-        require_number("--seed", self.seed, minimum=0)
-        require_number("--highpass", self.highpass_hz, minimum=0.0)
-        if self.fmax_hz is not None:
-            require_number("--fmax", self.fmax_hz, minimum=self.highpass_hz, inclusive=False)
-        if self.analysis_rate is not None:
-            require_number("--analysis-rate", self.analysis_rate, minimum=0.0, inclusive=False)
-
-    @classmethod
-    def for_condition(cls, condition: str, **overrides) -> "TactileParams":
-        """Parameters of a study condition A–F, with other fields overridden."""
-        key = condition.strip().upper()
-        if key not in CONDITIONS:
-            raise RealPenError(f"--condition: unknown condition '{condition}' (choose from "
-                               f"{', '.join(CONDITIONS)})")
-        top, subpatterns, unit_ms = CONDITIONS[key]
-        return cls(top=top, subpatterns=subpatterns, unit_ms=unit_ms, condition=key, **overrides)
+    return json.dumps(_canonical(value), sort_keys=True, separators=(",", ":"),
+                      ensure_ascii=False, allow_nan=False).encode("utf-8")
 
 
-    @classmethod
-    def resolve(cls, condition: str | None, top: int | None = None, subpatterns: int | None = None,
-                unit_ms: float | None = None, **options) -> "TactileParams":
-        """A condition preset or explicit counts (unset counts keep the defaults); not both."""
-        explicit = {key: value for key, value in
-                    (("top", top), ("subpatterns", subpatterns), ("unit_ms", unit_ms))
-                    if value is not None}
-        if condition is None:
-            # With no counts given the defaults are condition B, and the record says so.
-            return cls(**explicit, **options) if explicit else cls.for_condition("B", **options)
-        if explicit:
-            names = ", ".join("--" + key.replace("_", "-") for key in explicit)
-            raise RealPenError(f"--condition sets the counts; do not combine it with {names}")
-        return cls.for_condition(condition, **options)
+def content_version(value: Any, digits: int = 12) -> str:
+    """The first ``digits`` hex digits of the SHA-256 of :func:`canonical_json` of ``value``."""
+    return hashlib.sha256(canonical_json(value)).hexdigest()[:digits]
 
 
-@dataclass(frozen=True)
+def json_fields(cls: type) -> list:
+    """The dataclass fields of ``cls`` that its JSON form (and ``profile.json``) holds."""
+    return [item for item in fields(cls) if item.metadata.get("json", True)]
+
+
+def _finite(name: str, value: Any, minimum: float | None = None, inclusive: bool = True) -> float:
+    require_number(name, value, minimum=minimum, inclusive=inclusive)
+    return float(value)
+
+
+@dataclass(frozen=True, repr=False)
 class Component:
-    """One sinusoid of a sub-pattern.
+    """One sinusoid of a sub-pattern: ``amplitude · sin(2π·frequency_hz·t + phase)``.
+
+    ``t`` is counted in seconds from the start of its sub-pattern.
 
     Attributes:
-        frequency_hz: frequency in Hz.
-        power: mean-square power measured in the recording (recording unit squared).
-        weight: actuator weighting w(f) (dimensionless).
-        amplitude: amplitude in the output pattern (full scale = 1).
+        frequency_hz: frequency in Hz (> 0).
+        amplitude: amplitude in the output pattern, full scale = 1 (≥ 0).
         phase: phase in radians at the start of the sub-pattern.
+        power: mean-square power measured in the recording (recording unit squared), if known.
+        weight: actuator weighting w(f) (dimensionless), if known.
         clipped: whether the weighting cap limited this component.
         joins_previous: it continues a component of the previous sub-pattern (same track,
             continuous phase), so the crossfade into it is linear in amplitude.
         joins_next: it continues into the next sub-pattern, likewise.
+
+    Example:
+        >>> Component(175.0, 0.5)
+        Component(175 Hz, amplitude 0.5, phase 0 rad)
     """
 
-    frequency_hz: float
-    power: float
-    weight: float
-    amplitude: float
-    phase: float
+    frequency_hz: float = field(metadata={"schema": {"gt": 0}})
+    amplitude: float = field(metadata={"schema": {"ge": 0}})
+    phase: float = 0.0
+    power: float | None = field(default=None, metadata={"schema": {"ge": 0}})
+    weight: float | None = field(default=None, metadata={"schema": {"ge": 0}})
     clipped: bool = False
     joins_previous: bool = False
     joins_next: bool = False
 
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "frequency_hz", _finite("frequency_hz", self.frequency_hz, 0.0, False))
+        set_(self, "amplitude", _finite("amplitude", self.amplitude, 0.0))
+        set_(self, "phase", _finite("phase", self.phase))
+        for name in ("power", "weight"):
+            if getattr(self, name) is not None:
+                set_(self, name, _finite(name, getattr(self, name), 0.0))
+        for name in ("clipped", "joins_previous", "joins_next"):
+            value = getattr(self, name)
+            if not isinstance(value, (bool, np.bool_)):
+                raise ParameterError(name, f"must be True or False, got {value!r}")
+            set_(self, name, bool(value))
 
-@dataclass
-class Pattern:
-    """A looping tactile pattern and everything that made it.
+    def __repr__(self) -> str:
+        flags = [name.replace("_", " ") for name in ("clipped", "joins_previous", "joins_next")
+                 if getattr(self, name)]
+        return (f"Component({self.frequency_hz:.6g} Hz, amplitude {self.amplitude:.4g}, "
+                f"phase {self.phase:.4g} rad{''.join(', ' + flag for flag in flags)})")
+
+    def to_json(self) -> dict:
+        """Every field, in order (``profile.json``'s form of a component)."""
+        return {item.name: getattr(self, item.name) for item in fields(self)}
+
+    @classmethod
+    def from_json(cls, data: dict) -> Component:
+        """A component from :meth:`to_json`'s form (missing optional fields take defaults).
+
+        Raises:
+            ParameterError: unknown or missing fields, or bad values.
+        """
+        if isinstance(data, Component):
+            return data
+        if not isinstance(data, dict):
+            raise ParameterError("subpatterns", f"a component must be an object, got "
+                                                f"{type(data).__name__}")
+        unknown = sorted(set(data) - {item.name for item in fields(cls)})
+        if unknown:
+            raise ParameterError("subpatterns", f"unknown component field(s) {', '.join(unknown)}")
+        try:
+            return cls(**data)
+        except TypeError:
+            raise ParameterError("subpatterns", "a component needs frequency_hz and "
+                                                "amplitude") from None
+
+
+@dataclass(frozen=True, repr=False)
+class TactilePattern:
+    """A looping tactile pattern: components per sub-pattern, rate, lengths, boundaries.
 
     Attributes:
-        samples: the pattern, shape (frames,), full scale ±1; loops seamlessly.
-        rate: sample rate in Hz.
-        subpatterns: components of each sub-pattern, in order.
-        params: the parameters used.
-        actuator: the actuator the pattern is equalised for.
-        analysis: the analysis of the source recording (None when built from components).
-        gain: the normalisation gain applied to the relative amplitudes.
-        source: the source recording's path; source_sha256 its SHA-256.
-        notes: things the user should know (e.g. components limited by the cap).
-        source_info: the source recording's rate (Hz), axes, units and processing history.
+        subpatterns: the components of each sub-pattern, in playing order (each a tuple of
+            :class:`Component`; lists and JSON dicts are accepted and converted).
+        rate: the pattern's own rate in Hz (the rate of :attr:`samples`).
+        subpattern_ms: length of each sub-pattern in ms.
+        boundary: ``"crossfade"`` or ``"hard"`` (see :mod:`realpen.tactile.synthesis`).
+        crossfade_ms: crossfade length at each boundary and at the loop wrap, in ms.
+        actuator: the actuator the amplitudes are equalised for, if known.
+        params: the :class:`~realpen.tactile.conditions.TactileParams` it was built with.
+        analysis: the analysis of the source recording (:class:`realpen.dsp.spectrum.Analysis`;
+            ``analysis.selected`` are the units of the stretch it was made from).
+        provenance: the source recording (``path``, ``sha256``, ``rate_hz``, ``axes``, ``units``,
+            ``frames``, ``history``), the normalisation ``gain`` and ``stretch_s`` (start and
+            end in s of the analysed stretch), when built from a recording.
+        notes: things the user should know (e.g. components limited by the weighting cap).
+
+    Only the first five fields are the pattern (``profile.json`` stores them; equality and
+    :attr:`version` use them); the others say where it came from.
+
+    Example:
+        >>> pattern = TactilePattern([[Component(175.0, 0.5)], [Component(180.0, 0.4)]])
+        >>> pattern
+        TactilePattern(2 sub-patterns × 100 ms, 1 component each, 8000 Hz)
+        >>> pattern.render(44100).shape
+        (8820,)
     """
 
-    samples: np.ndarray
-    rate: int
-    subpatterns: list[list[Component]]
-    params: TactileParams
-    actuator: Actuator
-    analysis: Analysis | None = None
-    gain: float = 1.0
-    source: str | None = None
-    source_sha256: str | None = None
-    notes: list[str] = field(default_factory=list)
-    source_info: dict | None = None
+    subpatterns: tuple[tuple[Component, ...], ...]
+    rate: int = field(default=8000, metadata={"schema": {"gt": 0}})
+    subpattern_ms: float = field(default=100.0, metadata={"schema": {
+        "gt": 0, "le": MAX_SUBPATTERN_MS}})
+    boundary: str = field(default="crossfade", metadata={"choices": BOUNDARIES})
+    crossfade_ms: float = field(default=5.0, metadata={"schema": {"ge": 0}})
+    actuator: Actuator | None = field(default=None, compare=False, metadata=NOT_JSON)
+    params: TactileParams | None = field(default=None, compare=False, metadata=NOT_JSON)
+    analysis: Analysis | None = field(default=None, compare=False, metadata=NOT_JSON)
+    provenance: dict = field(default_factory=dict, compare=False, metadata=NOT_JSON)
+    notes: tuple[str, ...] = field(default=(), compare=False, metadata=NOT_JSON)
+    _samples: np.ndarray | None = field(default=None, init=False, compare=False,
+                                        metadata=NOT_JSON)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        if isinstance(self.subpatterns, (str, bytes, dict)) or not len(self.subpatterns):
+            raise ParameterError("subpatterns", "needs at least one sub-pattern")
+        subpatterns = []
+        for index, sub in enumerate(self.subpatterns):
+            if isinstance(sub, (str, bytes, dict)) or not len(sub):
+                raise ParameterError("subpatterns", f"sub-pattern {index} needs at least one "
+                                                    f"component")
+            subpatterns.append(tuple(Component.from_json(c) for c in sub))
+        set_(self, "subpatterns", tuple(subpatterns))
+        require_number("rate", self.rate, minimum=0.0, inclusive=False)
+        if int(self.rate) != self.rate:
+            raise ParameterError("rate", f"must be a whole number of Hz, got {self.rate:g}")
+        set_(self, "rate", int(self.rate))
+        set_(self, "subpattern_ms", _finite("subpattern_ms", self.subpattern_ms, 0.0, False))
+        require_number("subpattern_ms", self.subpattern_ms, maximum=MAX_SUBPATTERN_MS)
+        require_choice("boundary", self.boundary, BOUNDARIES)
+        set_(self, "crossfade_ms", _finite("crossfade_ms", self.crossfade_ms, 0.0))
+        require_number("crossfade_ms", self.crossfade_ms, maximum=self.subpattern_ms)
+        if subpattern_samples(self.rate, self.subpattern_ms) < 1:
+            raise ParameterError("subpattern_ms", f"{self.subpattern_ms:g} ms is less than one "
+                                                  f"sample at {self.rate} Hz")
+        if self.actuator is not None and not isinstance(self.actuator, Actuator):
+            raise ParameterError("actuator", f"must be an Actuator, got "
+                                             f"{type(self.actuator).__name__}")
+        set_(self, "provenance", dict(self.provenance or {}))
+        set_(self, "notes", tuple(self.notes))
+
+    # --- what it is -----------------------------------------------------------------------
+
+    @property
+    def frames(self) -> int:
+        """Length of one loop in samples at :attr:`rate`."""
+        return self.frames_at(self.rate)
+
+    def frames_at(self, rate: float) -> int:
+        """Length of one loop in samples at ``rate`` Hz."""
+        return subpattern_samples(rate, self.subpattern_ms) * len(self.subpatterns)
 
     @property
     def duration_s(self) -> float:
-        """Pattern length in seconds."""
-        return len(self.samples) / self.rate
+        """Loop length in seconds (whole samples at :attr:`rate`)."""
+        return self.frames / self.rate
+
+    @property
+    def components(self) -> list[Component]:
+        """Every component of every sub-pattern, in order."""
+        return [c for sub in self.subpatterns for c in sub]
+
+    @property
+    def max_frequency_hz(self) -> float:
+        """The highest component frequency in Hz."""
+        return max(c.frequency_hz for c in self.components)
 
     @property
     def clipped_count(self) -> int:
         """How many components the weighting cap limited."""
-        return sum(c.clipped for sub in self.subpatterns for c in sub)
+        return sum(c.clipped for c in self.components)
+
+    @property
+    def gain(self) -> float | None:
+        """The normalisation gain applied to the relative amplitudes, when built here."""
+        return self.provenance.get("gain")
+
+    @property
+    def source(self) -> str | None:
+        """The source recording's path, when built from one."""
+        return self.provenance.get("path")
+
+    @property
+    def stretch_s(self) -> tuple[float, float] | None:
+        """Start and end in s of the stretch of the recording it was made from, if known."""
+        stretch = self.provenance.get("stretch_s")
+        return None if stretch is None else (float(stretch[0]), float(stretch[1]))
+
+    @property
+    def version(self) -> str:
+        """12 hex digits of the SHA-256 of the canonical form of :meth:`to_json`."""
+        return content_version(self.to_json())
+
+    def __repr__(self) -> str:
+        counts = sorted({len(sub) for sub in self.subpatterns})
+        each = (f"{counts[0]} component{'s' if counts[0] != 1 else ''} each" if len(counts) == 1
+                else f"{counts[0]}–{counts[-1]} components")
+        extra = "" if self.boundary == "crossfade" else ", hard boundaries"
+        if self.actuator is not None:
+            spec = self.actuator.spec if self.actuator.kind != "measured" else \
+                "measured " + Path(self.actuator.spec).name
+            extra += f", {spec[:60]}"
+        count = len(self.subpatterns)
+        return (f"TactilePattern({count} sub-pattern{'s' if count != 1 else ''} × "
+                f"{self.subpattern_ms:g} ms, {each}, {self.rate} Hz{extra})")
+
+    # --- samples --------------------------------------------------------------------------
+
+    def render(self, rate: float | None = None) -> np.ndarray:
+        """Synthesise one loop at ``rate`` Hz (default: :attr:`rate`).
+
+        Sub-patterns are ``round(subpattern_ms × rate / 1000)`` samples long at any rate, so a
+        rate that makes the sub-pattern a whole number of samples keeps the lengths exact.
+
+        Returns:
+            float64 array, shape (:meth:`frames_at` ``(rate)``,), full scale ±1.
+
+        Raises:
+            ParameterError: ``rate`` is not positive, or not above twice the highest component
+                frequency (the components would alias).
+        """
+        rate = self.rate if rate is None else rate
+        require_number("rate", rate, minimum=0.0, inclusive=False)
+        if self.max_frequency_hz >= rate / 2:
+            raise ParameterError("rate", f"{rate:g} Hz is too low for components up to "
+                                         f"{self.max_frequency_hz:.0f} Hz (needs more than "
+                                         f"{2 * self.max_frequency_hz:.0f} Hz)")
+        return synthesize(self.subpatterns, rate, self.subpattern_ms, self.boundary,
+                          self.crossfade_ms)
+
+    @property
+    def samples(self) -> np.ndarray:
+        """The pattern at its own rate, shape (:attr:`frames`,), full scale ±1.
+
+        The samples it was built or loaded with (a profile's ``tactile.wav``), else
+        :meth:`render` ``()`` (computed once).
+        """
+        if self._samples is None:
+            object.__setattr__(self, "_samples", self.render())
+        return self._samples
+
+    def with_samples(self, samples: np.ndarray) -> TactilePattern:
+        """A copy whose :attr:`samples` are ``samples`` (e.g. the WAV it was saved as).
+
+        Raises:
+            ParameterError: ``samples`` is not one loop (:attr:`frames` values) of finite numbers.
+        """
+        samples = np.asarray(samples)
+        if samples.ndim != 1 or len(samples) != self.frames:
+            raise ParameterError("samples", f"must be one loop of {self.frames} samples at "
+                                            f"{self.rate} Hz, got shape {samples.shape}")
+        if not np.all(np.isfinite(samples)):
+            raise ParameterError("samples", "contains NaN or infinite values")
+        copy = TactilePattern(self.subpatterns, self.rate, self.subpattern_ms, self.boundary,
+                              self.crossfade_ms, self.actuator, self.params, self.analysis,
+                              self.provenance, self.notes)
+        object.__setattr__(copy, "_samples", samples)
+        return copy
+
+    # --- JSON -----------------------------------------------------------------------------
 
     def to_json(self) -> dict:
-        """The ``realpen tactile --json`` document."""
+        """The pattern's own fields, JSON-ready: ``rate``, ``subpattern_ms``, ``boundary``,
+        ``crossfade_ms`` and ``subpatterns`` (lists of :meth:`Component.to_json`). This is
+        ``profile.json``'s ``tactile`` section; :meth:`from_json` reads it back."""
+        data = {}
+        for item in json_fields(type(self)):
+            if item.name != "subpatterns":
+                data[item.name] = getattr(self, item.name)
+        data["subpatterns"] = [[c.to_json() for c in sub] for sub in self.subpatterns]
+        return data
+
+    @classmethod
+    def from_json(cls, data: dict, **origin) -> TactilePattern:
+        """A pattern from :meth:`to_json`'s form; ``origin`` sets the non-JSON fields
+        (``actuator``, ``params``, ``analysis``, ``provenance``, ``notes``).
+
+        Raises:
+            ParameterError: unknown fields or bad values.
+        """
+        if not isinstance(data, dict):
+            raise ParameterError("pattern", f"must be a JSON object, got {type(data).__name__}")
+        names = {item.name for item in json_fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ParameterError("pattern", f"unknown field(s) {', '.join(unknown)}")
+        if "subpatterns" not in data:
+            raise ParameterError("subpatterns", "is missing")
+        return cls(**data, **origin)
+
+    def report(self) -> dict:
+        """The ``realpen tactile --json`` document: the pattern, its parameters, actuator,
+        source and analysis, and notes."""
+        from realpen import __version__
+
         analysis = None
         if self.analysis is not None:
-            analysis = {"rate": self.analysis.rate,
-                        "selected_units": [int(i) for i in self.analysis.selected],
+            selected = [int(i) for i in self.analysis.selected]
+            analysis = {"rate": self.analysis.rate, "unit_ms": self.analysis.unit_ms,
+                        "selected_units": selected,
                         "selected_start_s": [round(float(self.analysis.starts_s[i]), 6)
-                                             for i in self.analysis.selected]}
+                                             for i in selected],
+                        "stretch_s": None if self.stretch_s is None
+                        else [round(v, 6) for v in self.stretch_s]}
+        source = {key: value for key, value in self.provenance.items()
+                  if key not in ("gain", "stretch_s")}
+        source["path"], source["sha256"] = source.get("path"), source.get("sha256")
+        cap_db = self.params.cap_db if self.params is not None else None
         return {
             "realpen_version": __version__,
-            "source": {"path": self.source, "sha256": self.source_sha256,
-                       **(self.source_info or {})},
-            "parameters": asdict(self.params),
-            "actuator": self.actuator.to_json(),
+            "version": self.version,
+            "source": source,
+            "parameters": None if self.params is None else self.params.to_json(),
+            "actuator": None if self.actuator is None else self.actuator.to_json(),
             "rate": self.rate,
-            "frames": int(len(self.samples)),
+            "frames": self.frames,
             "duration_s": self.duration_s,
-            "subpattern_ms": self.params.unit_ms,
+            "subpattern_ms": self.subpattern_ms,
+            "boundary": self.boundary,
+            "crossfade_ms": self.crossfade_ms,
             "gain": self.gain,
-            "weighting": {"cap_db": self.params.cap_db, "clipped_components": self.clipped_count},
+            "weighting": {"cap_db": cap_db, "clipped_components": self.clipped_count},
             "analysis": analysis,
-            "subpatterns": [[asdict(c) for c in sub] for sub in self.subpatterns],
-            "notes": self.notes,
+            "subpatterns": [[c.to_json() for c in sub] for sub in self.subpatterns],
+            "notes": list(self.notes),
         }
-
-
-def synthesize(subpatterns: list[list[Component]] | list[tuple[np.ndarray, ...]],
-               rate: int, subpattern_ms: float, boundary: str = "crossfade",
-               crossfade_ms: float = 5.0) -> np.ndarray:
-    """Superpose sinusoids per sub-pattern and join the sub-patterns into one loop.
-
-    Args:
-        subpatterns: per sub-pattern either a list of :class:`Component` or a tuple of arrays
-            (frequencies in Hz, amplitudes, phases in radians[, joins_previous, joins_next]).
-        rate: output rate in Hz.
-        subpattern_ms: length of each sub-pattern in ms.
-        boundary: ``"crossfade"`` (across the loop wrap too) or ``"hard"``.
-        crossfade_ms: fade length in ms. A component that continues a track across a
-            boundary fades linearly (its two halves are in phase); any other fades with equal
-            power (sin/cos), as uncorrelated material should.
-
-    Returns:
-        The loop, shape (len(subpatterns) × subpattern samples,).
-    """
-    length = int(round(subpattern_ms * rate / 1000.0))
-    total = length * len(subpatterns)
-    fade = int(round(crossfade_ms * rate / 1000.0)) if boundary == "crossfade" else 0
-    fade -= fade % 2  # even, so the fade is centred on the boundary
-    fade = min(fade, length)
-    out = np.zeros(total)
-    local = (np.arange(length + fade) - fade // 2) / rate
-    u = (np.arange(fade) + 0.5) / max(fade, 1)
-    power_in, linear_in = np.sin(0.5 * np.pi * u), u
-    for index, sub in enumerate(subpatterns):
-        freqs, amps, phases, joins_previous, joins_next = _arrays(sub)
-        waves = amps[:, None] * np.sin(2 * np.pi * freqs[:, None] * local[None, :] + phases[:, None])
-        if fade:
-            waves[:, :fade] *= np.where(joins_previous[:, None], linear_in, power_in)
-            waves[:, -fade:] *= np.where(joins_next[:, None], linear_in[::-1], power_in[::-1])
-        positions = (index * length - fade // 2 + np.arange(length + fade)) % total
-        np.add.at(out, positions, waves.sum(axis=0))
-    return out
-
-
-def _arrays(sub) -> tuple[np.ndarray, ...]:
-    if isinstance(sub, tuple):
-        arrays = [np.asarray(a, dtype=np.float64) for a in sub[:3]]
-        flags = [np.asarray(a, dtype=bool) for a in sub[3:5]]
-        flags += [np.zeros(len(arrays[0]), dtype=bool)] * (2 - len(flags))
-        return (*arrays, *flags)
-    return (np.array([c.frequency_hz for c in sub], dtype=np.float64),
-            np.array([c.amplitude for c in sub], dtype=np.float64),
-            np.array([c.phase for c in sub], dtype=np.float64),
-            np.array([c.joins_previous for c in sub], dtype=bool),
-            np.array([c.joins_next for c in sub], dtype=bool))
-
-
-def build_pattern(recording: Recording, actuator: Actuator, params: TactileParams = TactileParams(),
-                  progress: ProgressCallback | None = None) -> Pattern:
-    """Run the tactile pipeline on a loaded recording.
-
-    Preprocess (axes → one, optional resampling, high-pass), analyse unit sequences, select K
-    consecutive units, weight each unit's top-N peaks for the actuator, and synthesise the loop.
-
-    Raises:
-        RealPenError: any problem with the recording or the parameters.
-    """
-    prepared = prepare(recording, params.axis, params.analysis_rate, params.highpass_hz)
-    analysis = analyze(prepared.mono, prepared.rate, params.unit_ms, params.top,
-                       params.subpatterns, params.selection, fmin=params.highpass_hz,
-                       fmax=params.fmax_hz, source=recording.source, progress=progress)
-    if np.nanmax(analysis.frequencies_hz[analysis.selected]) >= params.rate / 2:
-        raise RealPenError(f"--rate: {params.rate} Hz is too low for components up to "
-                           f"{np.nanmax(analysis.frequencies_hz[analysis.selected]):.0f} Hz")
-    band = (params.highpass_hz, params.fmax_hz or prepared.rate / 2)
-    rng = np.random.default_rng(params.seed)
-    units = [analysis.unit(int(unit)) for unit in analysis.selected]
-    freqs_per_sub = [freqs for freqs, _ in units]
-    if params.boundary == "crossfade":
-        # Half the peak separation: two links can never claim the same peak.
-        tolerance = 0.5 * 1000.0 / params.unit_ms
-        successors = link_components(freqs_per_sub, tolerance, cyclic=True)
-        phases_per_sub, freqs_per_sub = continuous_phases(freqs_per_sub, successors,
-                                                          params.unit_ms / 1000.0, rng)
-        joins_previous, joins_next = joins(successors)
-    else:  # the literal method: independent sub-patterns, independent random phases
-        phases_per_sub = [rng.uniform(0.0, 2 * np.pi, size=len(f)) for f in freqs_per_sub]
-        joins_previous = joins_next = [np.zeros(len(f), dtype=bool) for f in freqs_per_sub]
-    relative = []
-    for index, (_, powers) in enumerate(units):
-        freqs = freqs_per_sub[index]
-        share = powers / powers.sum()
-        weights = weighting(actuator, freqs, band, params.cap_db)
-        base = np.sqrt(share) if params.amplitude == "sqrt" else share
-        relative.append((freqs, powers, weights.weights, base * weights.weights,
-                         phases_per_sub[index], weights.clipped, joins_previous[index],
-                         joins_next[index]))
-    raw = synthesize([(f, a, p, jp, jn) for f, _, _, a, p, _, jp, jn in relative], params.rate,
-                     params.unit_ms, params.boundary, params.crossfade_ms)
-    peak = float(np.max(np.abs(raw)))
-    if not np.isfinite(peak) or peak <= 0:
-        raise RealPenError(f"{recording.source}: the pattern came out silent or not finite; "
-                           f"check the actuator and weighting parameters")
-    gain = 10 ** (-params.headroom_db / 20) / peak
-    subpatterns = [[Component(float(f), float(pw), float(w), float(a * gain), float(p), bool(c),
-                              bool(jp), bool(jn))
-                    for f, pw, w, a, p, c, jp, jn in zip(*sub)] for sub in relative]
-    notes = []
-    info = {"rate_hz": recording.rate, "axes": list(recording.axes), "units": recording.units,
-            "frames": int(recording.samples.shape[0]), "history": list(prepared.history)}
-    pattern = Pattern(raw * gain, params.rate, subpatterns, params, actuator, analysis, gain,
-                      recording.source, recording.sha256, notes, info)
-    if pattern.clipped_count:
-        notes.append(f"{pattern.clipped_count} component(s) limited by the {params.cap_db:g} dB "
-                     f"weighting cap")
-    return pattern

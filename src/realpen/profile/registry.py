@@ -1,0 +1,66 @@
+"""Where profiles live: the bundled pens, the user's profiles folder, and extra folders.
+
+The user's profiles folder is :func:`realpen.io.paths.user_profiles_dir`
+(``$REALPEN_HOME/profiles``, else ``$XDG_DATA_HOME/realpen/profiles``, else
+``~/.local/share/realpen/profiles``). A bundle there is a sub-folder holding ``profile.json``
+or a ``.zip`` file.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from realpen.errors import RealPenError
+from realpen.profile.bundle import PenProfile, load_profile
+from realpen.profile.schema import PROFILE_JSON
+
+__all__ = ["profile_locations", "list_profiles", "resolve_profile"]
+
+
+def profile_locations(extra: list[Path] | None = None) -> list[tuple[str, Path]]:
+    """Where profiles are looked for, in order: ("bundled", folder), ("user", folder), then
+    ("extra", folder) for each of ``extra``."""
+    from realpen.io.paths import user_profiles_dir
+    from realpen.pens import bundled_dir
+
+    places = [("bundled", bundled_dir()), ("user", user_profiles_dir())]
+    places += [("extra", Path(p)) for p in (extra or [])]
+    return places
+
+
+def list_profiles(extra: list[Path] | None = None) -> list[tuple[str, Path]]:
+    """Every profile found: (where, bundle path), bundled first; later names do not hide earlier.
+
+    A bundle is a sub-folder holding ``profile.json`` or a ``.zip`` file.
+    """
+    found = []
+    for where, folder in profile_locations(extra):
+        if not folder.is_dir():
+            continue
+        for entry in sorted(folder.iterdir()):
+            if (entry.is_dir() and (entry / PROFILE_JSON).is_file()) or entry.suffix == ".zip":
+                found.append((where, entry))
+    return found
+
+
+def resolve_profile(name_or_path: str | os.PathLike,
+                    extra: list[Path] | None = None) -> PenProfile:
+    """Load a profile by path (folder or ``.zip``) or by name (bundled, user, extra folders).
+
+    Example:
+        >>> resolve_profile("pencil").name
+        'pencil'
+
+    Raises:
+        RealPenError: no such profile (the known names are listed), or a broken bundle.
+    """
+    name_or_path = os.fspath(name_or_path)
+    candidate = Path(name_or_path)
+    if candidate.exists() or candidate.suffix == ".zip" or os.sep in name_or_path:
+        return load_profile(candidate)
+    for _, path in list_profiles(extra):
+        if path.name == name_or_path or path.stem == name_or_path:
+            return load_profile(path)
+    names = sorted({path.stem for _, path in list_profiles(extra)})
+    raise RealPenError(f"{name_or_path}: no such profile (known: {', '.join(names) or 'none'})")

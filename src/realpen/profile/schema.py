@@ -1,0 +1,284 @@
+"""``profile.json``: the versioned, validated description of a pen profile (format 2).
+
+::
+
+    {"format": 2, "name": "pencil", "tool": "pencil (4B)", "description": "…",
+     "tactile":  TactilePattern.to_json()  (rate, subpattern_ms, boundary, crossfade_ms,
+                                            subpatterns: [[component, …], …]),
+     "sound":    {rate, frames, mode, unit_ms, crossfade_ms, start_s, rms_dbfs, seam},
+     "actuator": Actuator.to_json()        (spec, kind, params[, table_hz, table_response]),
+     "coupling": Coupling (realpen.coupling/1, Eq. 1),
+     "files":    {"tactile": {file, rate, frames, sha256}, "sound": {…}},
+     "provenance": {realpen_version, sources, tactile_parameters, sound_parameters, model, notes}}
+
+The ``tactile`` section is exactly the fields of :class:`realpen.tactile.pattern.TactilePattern`:
+its pydantic model is *generated* from that dataclass (:func:`model_of`) and validating it
+yields a ``TactilePattern``; likewise ``actuator`` is read by
+:meth:`realpen.tactile.actuator.Actuator.from_json`. ``files`` describes the two WAVs (checked
+on loading).
+
+Format 1 (RealPen ≤ 0.1: WAV rate, frames and SHA-256 inside the ``tactile`` and ``sound``
+sections, the actuator's ``table_*`` always present) is still read: :func:`upgrade` turns it
+into format 2.
+
+The profile's *version* (:func:`profile_version`) is the SHA-256 of a canonical form of the
+document without ``files`` (floats rounded to 9 significant digits, keys sorted, compact
+separators), so the same pen has the same version on every machine. ``files`` is left out
+because the WAVs follow from the rest (components; the sound's source hash and start), while
+their bytes, and so their SHA-256, can differ in the last bits of a float between machines.
+
+Imports pydantic and numpy only (the Coupling type is loaded when a document is validated), so
+the WebSocket schema can import :data:`NAME_PATTERN` without scipy or soundfile.
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+from dataclasses import MISSING
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PlainSerializer,
+    PlainValidator,
+    ValidationError,
+    WithJsonSchema,
+    create_model,
+    model_validator,
+)
+
+from realpen.tactile.actuator import KINDS, Actuator
+from realpen.tactile.pattern import Component, TactilePattern, content_version, json_fields
+
+__all__ = ["FORMAT", "READABLE_FORMATS", "NAME_PATTERN", "PROFILE_JSON", "TACTILE_WAV",
+           "SOUND_WAV", "BUNDLE_FILES", "ComponentModel", "TactileModel", "SoundSection",
+           "WavFile", "BundleFiles", "SourceFile", "Provenance", "ProfileMeta", "model_of",
+           "upgrade", "profile_version"]
+
+FORMAT = 2
+READABLE_FORMATS = (1, 2)
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+PROFILE_JSON, TACTILE_WAV, SOUND_WAV = "profile.json", "tactile.wav", "sound.wav"
+BUNDLE_FILES = (PROFILE_JSON, TACTILE_WAV, SOUND_WAV)
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+def model_of(cls: type, name: str, overrides: dict[str, Any] | None = None) -> type[BaseModel]:
+    """A strict pydantic model of the JSON fields of dataclass ``cls``.
+
+    Types come from the dataclass annotations, constraints from each field's ``metadata``
+    (``{"schema": {"gt": 0}}``; ``{"choices": (...)}`` becomes a ``Literal``), defaults from the
+    dataclass; ``overrides`` replaces the type of some fields (e.g. nested models).
+    """
+    namespace = vars(sys.modules[cls.__module__])
+    definitions = {}
+    for item in json_fields(cls):
+        if overrides and item.name in overrides:
+            kind = overrides[item.name]
+        elif "choices" in item.metadata:
+            kind = Literal[tuple(item.metadata["choices"])]
+        else:
+            kind = eval(item.type, namespace) if isinstance(item.type, str) else item.type  # noqa: S307
+        if item.default is not MISSING:
+            default = item.default
+        elif item.default_factory is not MISSING:
+            default = item.default_factory()
+        else:
+            default = ...
+        definitions[item.name] = (kind, Field(default, **item.metadata.get("schema", {})))
+    return create_model(name, __base__=_Strict, __doc__=(cls.__doc__ or "").split("\n")[0],
+                        **definitions)
+
+
+ComponentModel = model_of(Component, "ComponentModel")
+TactileModel = model_of(TactilePattern, "TactileModel", {
+    "subpatterns": list[Annotated[list[ComponentModel], Field(min_length=1)]]})
+
+
+def _pattern(model: BaseModel) -> TactilePattern:
+    return TactilePattern(**{name: getattr(model, name) for name in TactileModel.model_fields
+                             if name != "subpatterns"},
+                          subpatterns=[[Component(**c.model_dump()) for c in sub]
+                                       for sub in model.subpatterns])
+
+
+def _serialise_pattern(pattern: TactilePattern) -> dict:
+    return pattern.to_json()
+
+
+def _pattern_json(value: Any) -> Any:
+    return value.to_json() if isinstance(value, TactilePattern) else value
+
+
+TactileField = Annotated[TactileModel, BeforeValidator(_pattern_json), AfterValidator(_pattern),
+                         PlainSerializer(_serialise_pattern)]
+
+
+def _actuator(value: Any) -> Actuator:
+    return Actuator.from_json(value)
+
+
+ActuatorField = Annotated[Any, PlainValidator(_actuator), PlainSerializer(Actuator.to_json),
+                          WithJsonSchema({
+                              "type": "object", "required": ["spec", "kind"],
+                              "properties": {"spec": {"type": "string"},
+                                             "kind": {"enum": list(KINDS)},
+                                             "params": {"type": "object"},
+                                             "table_hz": {"type": "array"},
+                                             "table_response": {"type": "array"}},
+                              "description": "realpen.tactile.actuator.Actuator.to_json()"})]
+
+
+def _coupling(value: Any):
+    from realpen.sound.coupling import Coupling
+
+    if isinstance(value, Coupling):
+        return value
+    try:
+        return Coupling.model_validate(value)
+    except ValidationError as error:
+        first = error.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise ValueError(f"{where}: {first['msg']}" if where else first["msg"]) from None
+
+
+CouplingField = Annotated[Any, PlainValidator(_coupling),
+                          PlainSerializer(lambda coupling: coupling.model_dump(mode="json")),
+                          WithJsonSchema({"type": "object",
+                                          "description": "realpen.coupling/1 "
+                                                         "(realpen.sound.coupling.Coupling)"})]
+
+
+class SoundSection(_Strict):
+    """The friction-sound unit: its rate (Hz), length (frames) and how it was cut."""
+
+    rate: int = Field(gt=0)
+    frames: int = Field(gt=0)
+    mode: Literal["loop", "granular"] = "loop"
+    unit_ms: float = Field(gt=0)
+    crossfade_ms: float = Field(ge=0)
+    start_s: float | None = None
+    rms_dbfs: float
+    seam: dict
+
+
+class WavFile(_Strict):
+    """One WAV of the bundle: its name, rate (Hz), length (frames) and SHA-256."""
+
+    file: str
+    rate: int = Field(gt=0)
+    frames: int = Field(gt=0)
+    sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
+
+
+class BundleFiles(_Strict):
+    """The bundle's two WAVs."""
+
+    tactile: WavFile
+    sound: WavFile
+
+
+class SourceFile(_Strict):
+    """A file the profile was built from."""
+
+    role: str
+    name: str
+    sha256: str | None = None
+
+
+class Provenance(_Strict):
+    """Where a profile came from."""
+
+    realpen_version: str
+    sources: list[SourceFile]
+    tactile_parameters: dict
+    sound_parameters: dict
+    model: dict | None = None
+    notes: list[str] = []
+
+
+class ProfileMeta(_Strict):
+    """``profile.json``, format 2 (see the module docstring).
+
+    ``tactile`` is a :class:`~realpen.tactile.pattern.TactilePattern` (without samples),
+    ``actuator`` an :class:`~realpen.tactile.actuator.Actuator`, ``coupling`` a
+    :class:`~realpen.sound.coupling.Coupling`.
+    """
+
+    format: Literal[2] = FORMAT
+    name: str = Field(pattern=NAME_PATTERN)
+    tool: str
+    description: str = ""
+    tactile: TactileField
+    sound: SoundSection
+    actuator: ActuatorField
+    coupling: CouplingField
+    files: BundleFiles
+    provenance: Provenance
+
+    @model_validator(mode="after")
+    def _files_agree(self) -> ProfileMeta:
+        pattern, wav = self.tactile, self.files.tactile
+        if wav.file != TACTILE_WAV or self.files.sound.file != SOUND_WAV:
+            raise ValueError(f"files: the WAVs are {TACTILE_WAV} and {SOUND_WAV}")
+        if pattern.rate != wav.rate or pattern.frames != wav.frames:
+            raise ValueError(f"tactile: {len(pattern.subpatterns)} sub-patterns of "
+                             f"{pattern.subpattern_ms:g} ms at {pattern.rate} Hz are "
+                             f"{pattern.frames} frames, not {wav.frames} at {wav.rate} Hz "
+                             f"({TACTILE_WAV})")
+        sound = self.sound
+        if (sound.rate, sound.frames) != (self.files.sound.rate, self.files.sound.frames):
+            raise ValueError(f"sound: {sound.frames} frames at {sound.rate} Hz, but "
+                             f"{SOUND_WAV} is {self.files.sound.frames} at "
+                             f"{self.files.sound.rate} Hz")
+        return self
+
+
+def upgrade(document: dict) -> dict:
+    """A format-1 ``profile.json`` document in format 2 (a copy; format 2 is returned as is).
+
+    Format 1 kept each WAV's ``file``, ``rate``, ``frames`` and ``sha256`` in the ``tactile``
+    and ``sound`` sections; format 2 keeps them in ``files``, and the ``tactile`` section is
+    exactly the pattern. A document too broken to move is returned for validation to refuse.
+    """
+    if document.get("format") != 1:
+        return document
+    upgraded = copy.deepcopy(document)
+    upgraded["format"] = 2
+    tactile, sound = upgraded.get("tactile"), upgraded.get("sound")
+    if not isinstance(tactile, dict) or not isinstance(sound, dict):
+        return upgraded
+    files = {}
+    for key, section, wav in (("tactile", tactile, TACTILE_WAV), ("sound", sound, SOUND_WAV)):
+        files[key] = {"file": section.pop("file", wav), "rate": section.get("rate"),
+                      "frames": section.get("frames"), "sha256": section.pop("sha256", None)}
+    tactile.pop("frames", None)
+    actuator = upgraded.get("actuator")
+    if isinstance(actuator, dict):
+        for key in ("table_hz", "table_response"):
+            if key in actuator and actuator[key] is None:
+                del actuator[key]
+    ordered = {}
+    for key, value in upgraded.items():
+        ordered[key] = value
+        if key == "coupling":
+            ordered["files"] = files
+    ordered.setdefault("files", files)
+    return ordered
+
+
+def profile_version(meta: ProfileMeta | dict) -> str:
+    """The content version of a profile: 12 hex digits of the SHA-256 of the canonical form
+    (floats to 9 significant digits, sorted keys, compact) of ``profile.json`` without
+    ``files``."""
+    document = meta.model_dump(mode="json") if isinstance(meta, BaseModel) else dict(meta)
+    document.pop("files", None)
+    return content_version(document)

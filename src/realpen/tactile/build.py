@@ -1,0 +1,203 @@
+"""From a recording to a :class:`~realpen.tactile.pattern.TactilePattern`: the method's pipeline.
+
+1. Preprocess (:func:`realpen.dsp.filters.prepare`): axes → one (DFT321), optional polyphase
+   resampling, zero-phase high-pass.
+2. Analyse unit sequences of ``selection_unit_ms`` (100 ms) and select the stretch: K × units
+   consecutive units, never the first or the last (:func:`realpen.dsp.spectrum.analyze`).
+3. Principal frequencies per sub-pattern: each selected unit's own (A–C), or — when a
+   sub-pattern spans several units (D–F: the 15 units of B's stretch) — those of the
+   concatenated units analysed as one unit.
+4. Link components across sub-patterns into tracks with continuous phase (crossfade) or draw
+   independent phases (hard), seeded.
+5. Amplitude ∝ √(power share) (or the share) × the actuator weighting 1/|H(f)| (capped).
+6. Synthesise (:mod:`realpen.tactile.synthesis`) and normalise the peak to ``headroom_db``
+   below full scale.
+
+Per sub-pattern one sinusoid is superposed per principal frequency, with a seeded random phase,
+which keeps the crest factor low. A frequency that persists into the next sub-pattern keeps its
+phase there (see :mod:`realpen.dsp.tracks`), so crossfades never make it dip. The power ratio is
+the component's share of its own sub-pattern's total, so every sub-pattern carries the same
+total level and the fluctuation lies in its frequency content.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from realpen.dsp.filters import prepare
+from realpen.dsp.spectrum import ProgressCallback, analyze, principal_frequencies
+from realpen.dsp.tracks import continuous_phases, joins, link_components
+from realpen.errors import ParameterError, RealPenError, fail
+from realpen.io.recording import Recording
+from realpen.tactile.actuator import Actuator, as_actuator, weighting
+from realpen.tactile.conditions import TactileParams
+from realpen.tactile.pattern import Component, TactilePattern
+from realpen.tactile.synthesis import synthesize
+
+__all__ = ["build_pattern", "tactile_pattern", "DEFAULT_ACTUATOR"]
+
+DEFAULT_ACTUATOR = "lra:f0=175,q=8"
+
+
+def _as_recording(recording, input_rate: float | None) -> Recording:
+    if isinstance(recording, Recording):
+        if input_rate is not None:
+            raise ParameterError("input_rate", "is only for an array; a Recording has its rate")
+        return recording
+    if isinstance(recording, (str, os.PathLike)):
+        from realpen.io.recording import load_recording
+
+        if input_rate is not None:
+            return load_recording(recording, rate=input_rate)
+        return load_recording(recording)
+    if isinstance(recording, np.ndarray):
+        if input_rate is None:
+            raise ParameterError("input_rate", "give the rate in Hz of an array recording")
+        samples = recording if recording.ndim == 2 else recording.reshape(len(recording), -1)
+        axes = ("z",) if samples.shape[1] == 1 else tuple("xyz"[:samples.shape[1]]) \
+            if samples.shape[1] <= 3 else tuple(f"a{i}" for i in range(samples.shape[1]))
+        return Recording(samples, float(input_rate), axes, source="array")
+    raise ParameterError("recording", f"must be a Recording, a path or an array, got "
+                                      f"{type(recording).__name__}")
+
+
+def _subpattern_peaks(mono: np.ndarray, rate: float, analysis, params: TactileParams,
+                      source: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(frequencies Hz, powers) per sub-pattern, strongest first."""
+    per = params.units_per_subpattern
+    if per == 1:
+        return [analysis.unit(int(unit)) for unit in analysis.selected]
+    unit_samples = int(round(params.selection_unit_ms * rate / 1000.0))
+    peaks = []
+    for index in range(params.subpatterns):
+        units = analysis.selected[index * per:(index + 1) * per]
+        segment = mono[int(units[0]) * unit_samples:(int(units[-1]) + 1) * unit_samples]
+        # The concatenated units are one unit: exactly their samples.
+        _, freqs, powers, _ = principal_frequencies(
+            segment, rate, len(segment) * 1000.0 / rate, params.top, params.highpass_hz,
+            params.fmax_hz, source=source)
+        keep = np.isfinite(freqs[0])
+        if not keep.any():
+            raise fail(source, f"no spectral peaks in the selected {len(segment) / rate:.2f} s")
+        peaks.append((freqs[0][keep], powers[0][keep]))
+    return peaks
+
+
+def build_pattern(recording: Recording, actuator: Actuator | str = DEFAULT_ACTUATOR,
+                  params: TactileParams | None = None, progress: ProgressCallback | None = None,
+                  **options) -> TactilePattern:
+    """Run the tactile pipeline on a recording (see the module docstring).
+
+    Args:
+        recording: a :class:`~realpen.io.recording.Recording` (any axes, any rate), a path to
+            one, or an array with ``input_rate=`` (Hz).
+        actuator: an :class:`~realpen.tactile.actuator.Actuator` or a spec string
+            (``"lra:f0=175,q=8"``).
+        params: the parameters (default: condition B); ``options`` override its fields
+            (:meth:`TactileParams.updated`), or make it when it is None (``condition="E"``,
+            ``rate=8000``, …).
+        progress: called as ``progress(units_done, units_total)`` during the analysis.
+
+    Returns:
+        The pattern, with its actuator, parameters, analysis and provenance.
+
+    Raises:
+        ParameterError: a bad parameter, named as in :class:`TactileParams` (e.g. ``rate`` too
+            low for the components).
+        RealPenError: a problem with the recording (too short, silent, …), naming it.
+
+    Example:
+        >>> from realpen.examples import example_recording_path
+        >>> build_pattern(example_recording_path(), "lra:f0=175,q=8", condition="E")
+        TactilePattern(1 sub-pattern × 1500 ms, 10 components each, 8000 Hz, lra:f0=175,q=8)
+    """
+    input_rate = options.pop("input_rate", None)
+    if params is None:
+        params = TactileParams(**options)
+    elif not isinstance(params, TactileParams):
+        raise ParameterError("params", f"must be TactileParams, got {type(params).__name__}")
+    elif options:
+        params = params.updated(**options)
+    actuator = as_actuator(actuator)
+    recording = _as_recording(recording, input_rate)
+    prepared = prepare(recording, params.axis, params.analysis_rate, params.highpass_hz)
+    analysis = analyze(prepared.mono, prepared.rate, params.selection_unit_ms, params.top,
+                       params.subpatterns * params.units_per_subpattern, params.selection,
+                       fmin=params.highpass_hz, fmax=params.fmax_hz, source=recording.source,
+                       progress=progress)
+    units = _subpattern_peaks(prepared.mono, prepared.rate, analysis, params, recording.source)
+    highest = max(float(np.max(freqs)) for freqs, _ in units)
+    if highest >= params.rate / 2:
+        raise ParameterError("rate", f"{params.rate} Hz is too low for components up to "
+                                     f"{highest:.0f} Hz")
+    band = (params.highpass_hz, params.fmax_hz or prepared.rate / 2)
+    rng = np.random.default_rng(params.seed)
+    freqs_per_sub = [freqs for freqs, _ in units]
+    if params.boundary == "crossfade":
+        # Half the peak separation: two links can never claim the same peak.
+        tolerance = 0.5 * 1000.0 / params.unit_ms
+        successors = link_components(freqs_per_sub, tolerance, cyclic=True)
+        phases_per_sub, freqs_per_sub = continuous_phases(freqs_per_sub, successors,
+                                                          params.unit_ms / 1000.0, rng)
+        joins_previous, joins_next = joins(successors)
+    else:  # the literal method: independent sub-patterns, independent random phases
+        phases_per_sub = [rng.uniform(0.0, 2 * np.pi, size=len(f)) for f in freqs_per_sub]
+        joins_previous = joins_next = [np.zeros(len(f), dtype=bool) for f in freqs_per_sub]
+    relative = []
+    for index, (_, powers) in enumerate(units):
+        freqs = freqs_per_sub[index]
+        share = powers / powers.sum()
+        weights = weighting(actuator, freqs, band, params.cap_db)
+        base = np.sqrt(share) if params.amplitude == "sqrt" else share
+        relative.append((freqs, powers, weights.weights, base * weights.weights,
+                         phases_per_sub[index], weights.clipped, joins_previous[index],
+                         joins_next[index]))
+    raw = synthesize([(f, a, p, jp, jn) for f, _, _, a, p, _, jp, jn in relative], params.rate,
+                     params.unit_ms, params.boundary, params.crossfade_ms)
+    peak = float(np.max(np.abs(raw)))
+    if not np.isfinite(peak) or peak <= 0:
+        raise RealPenError(f"{recording.source}: the pattern came out silent or not finite; "
+                           f"check the actuator and weighting parameters")
+    gain = 10 ** (-params.headroom_db / 20) / peak
+    subpatterns = [[Component(float(f), float(a * gain), float(p), float(pw), float(w), bool(c),
+                              bool(jp), bool(jn))
+                    for f, pw, w, a, p, c, jp, jn in zip(*sub)] for sub in relative]
+    first, last = int(analysis.selected[0]), int(analysis.selected[-1])
+    unit_samples = int(round(params.selection_unit_ms * prepared.rate / 1000.0))
+    provenance = {"path": recording.source, "sha256": recording.sha256,
+                  "rate_hz": recording.rate, "axes": list(recording.axes),
+                  "units": recording.units, "frames": int(recording.samples.shape[0]),
+                  "history": list(prepared.history), "gain": gain,
+                  "stretch_s": (float(analysis.starts_s[first]),
+                                float(analysis.starts_s[last] + unit_samples / prepared.rate))}
+    clipped = sum(bool(c) for sub in relative for c in sub[5])
+    notes = ((f"{clipped} component(s) limited by the {params.cap_db:g} dB weighting cap",)
+             if clipped else ())
+    pattern = TactilePattern(subpatterns, params.rate, params.unit_ms, params.boundary,
+                             params.crossfade_ms, actuator, params, analysis, provenance, notes)
+    return pattern.with_samples(raw * gain)
+
+
+def tactile_pattern(recording, actuator: Actuator | str = DEFAULT_ACTUATOR, *,
+                    condition: str | None = None, progress: ProgressCallback | None = None,
+                    **options) -> TactilePattern:
+    """The tactile pattern of a recording for an actuator, as the method makes it.
+
+    Args:
+        recording: a :class:`~realpen.io.recording.Recording`, a path, or an array with
+            ``input_rate=`` (Hz).
+        actuator: an :class:`~realpen.tactile.actuator.Actuator` or a spec string.
+        condition: a study condition A–F (None: B's counts, or the counts given).
+        progress: called as ``progress(units_done, units_total)``.
+        options: any field of :class:`~realpen.tactile.conditions.TactileParams` (``top``,
+            ``subpatterns``, ``unit_ms``, ``rate`` in Hz, ``boundary``, ``seed``, ``cap_db``, …).
+
+    Example:
+        >>> from realpen.examples import example_recording_path
+        >>> pattern = tactile_pattern(example_recording_path(), condition="B")
+        >>> len(pattern.subpatterns), pattern.duration_s
+        (15, 1.5)
+    """
+    return build_pattern(recording, actuator, None, progress, condition=condition, **options)

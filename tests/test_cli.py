@@ -1,0 +1,217 @@
+"""The command line as people expect it: --version, -h, ``python -m realpen``, help without the
+heavy imports, one flag map, no silent replacement of outputs, and ``profile build --install``.
+
+Everything runs in-process through :func:`conftest.run_cli`, except two subprocesses: ``python
+-m realpen --help`` and a fresh interpreter that checks what importing the CLI loads.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+from conftest import assert_clean_failure, run_cli, run_cli_process
+
+import realpen
+from realpen.cli.flags import COMMAND_FLAGS, DEFAULT_FLAGS, flag_for
+
+
+def leaf_commands() -> dict:
+    """Every runnable command by its path (``"sound loop"``), as click objects."""
+    import typer.main
+
+    from realpen.cli import app
+
+    def walk(command, path):
+        if hasattr(command, "commands"):
+            for name, sub in command.commands.items():
+                yield from walk(sub, [*path, name])
+        else:
+            yield " ".join(path), command
+
+    return dict(walk(typer.main.get_command(app), []))
+
+
+def flags_of(command) -> set[str]:
+    return {flag for param in command.params for flag in (*param.opts, *param.secondary_opts)}
+
+
+# --- --version, -h, python -m realpen --------------------------------------------------------
+
+def test_version_prints_the_package_version():
+    result = run_cli("--version")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout == f"realpen {realpen.__version__}\n"
+    assert re.fullmatch(r"realpen \d+\.\d+\.\d+\S*", result.stdout.strip())
+
+
+@pytest.mark.parametrize("path", ["", "analyze", "tactile", "sound", "sound loop", "sound render",
+                                  "sound fit", "profile", "profile build", "export", "serve",
+                                  "strokes export", "hatt", "hatt list", "hatt synth"])
+def test_dash_h_is_help_everywhere(path):
+    short, long = run_cli(*path.split(), "-h"), run_cli(*path.split(), "--help")
+    assert short.returncode == 0 == long.returncode, short.stderr
+    assert "Usage: realpen" in short.stdout and short.stdout == long.stdout
+
+
+def test_python_dash_m_realpen_prints_usage():
+    done = run_cli_process("--help")
+    assert done.returncode == 0, done.stderr
+    assert "Usage: realpen" in done.stdout and "hatt" in done.stdout and "--version" in done.stdout
+
+
+def test_help_imports_nothing_heavy():
+    """``realpen --help`` must answer at once: no scipy (nor soundfile, matplotlib, FastAPI)."""
+    code = ("import sys\n"
+            "from realpen.cli import main\n"
+            "try:\n"
+            "    main(['--help'])\n"
+            "except SystemExit:\n"
+            "    pass\n"
+            "heavy = ('scipy', 'soundfile', 'matplotlib', 'fastapi', 'uvicorn', 'sqlalchemy')\n"
+            "print(sorted({m.split('.')[0] for m in sys.modules} & set(heavy)), file=sys.stderr)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0 and "Usage: realpen" in done.stdout, done.stderr
+    assert done.stderr.strip() == "[]"
+
+
+def test_defaults_written_out_for_fast_help_agree_with_the_library():
+    from realpen.cli import export_cmds, sound_cmds, tactile_cmds
+    from realpen.exports import FORMATS
+    from realpen.sound import granular, loop, stroke
+    from realpen.tactile.conditions import CONDITIONS
+
+    for module, names in ((loop, ("UNIT_MS", "CROSSFADE_MS", "DEFAULT_RATE", "MIN_RATE",
+                                  "MAX_RATE", "REFERENCE_DBFS")),
+                          (granular, ("GRAIN_MS", "LENGTH_MS", "MAX_LENGTH_MS")),
+                          (stroke, ("MODES",))):
+        for name in names:
+            assert getattr(sound_cmds, name) == getattr(module, name), name
+    assert export_cmds.FORMAT_NAMES == tuple(FORMATS)
+    for key, (top, subpatterns, unit_ms) in CONDITIONS.items():
+        assert f"{key}={top}×{subpatterns}×{unit_ms:g}ms" in tactile_cmds.CONDITION_HELP
+
+
+# --- the one flag map ------------------------------------------------------------------------
+
+def test_every_mapped_flag_exists_on_a_command():
+    commands = leaf_commands()
+    everywhere = set().union(*(flags_of(c) for c in commands.values()))
+    assert set(DEFAULT_FLAGS.values()) <= everywhere, set(DEFAULT_FLAGS.values()) - everywhere
+    for path, overrides in COMMAND_FLAGS.items():
+        assert set(overrides.values()) <= flags_of(commands[path]), path
+
+
+def test_an_option_named_like_a_library_parameter_maps_to_its_own_flag():
+    """Where a command's option has a library parameter's name, the map gives that option's
+    flag: a ParameterError about it shows the flag the user typed."""
+    for path, command in leaf_commands().items():
+        for param in command.params:
+            if param.param_type_name != "option":
+                continue
+            flag = flag_for(path, param.name)
+            if flag != param.name:
+                assert flag in (*param.opts, *param.secondary_opts), (path, param.name, flag)
+
+
+def test_qualified_keys_tell_apart_two_parameters_of_one_name():
+    assert flag_for("tactile", "rate", ["_load_csv", "load_recording", "tactile"]) == "--input-rate"
+    assert flag_for("tactile", "rate", ["build_pattern", "tactile"]) == "--rate"
+    assert flag_for("profile build", "unit_ms", ["find_loop_unit", "build_profile"]) \
+        == "--sound-unit-ms"
+    assert flag_for("profile build", "unit_ms", ["analyze", "build_pattern", "build_profile"]) \
+        == "--unit-ms"
+    assert flag_for("analyze", "count") == "--subpatterns"
+    assert flag_for("sound render", "find_unit") == "--as-loop"
+    assert flag_for("analyze", "no_such_parameter") == "no_such_parameter"
+
+
+# --- no silent replacement -------------------------------------------------------------------
+
+def test_sound_commands_refuse_existing_outputs_unless_forced(tmp_path):
+    measurements = tmp_path / "m.csv"
+    rows = [f"{p:.2f},{v:.1f},{0.9 * (p - 0.2) + 0.012 * (v - 8):.5f}"
+            for p in (0.3, 0.5, 0.7, 0.9) for v in (20.0, 60.0, 100.0, 140.0)]
+    measurements.write_text("pressure,speed,amplitude\n" + "\n".join(rows) + "\n")
+    out, report = tmp_path / "coupling.json", tmp_path / "fit.json"
+    report.write_text("{}")
+    result = run_cli("sound", "fit", measurements, "-o", out, "--json", report)
+    assert_clean_failure(result, f"realpen: error: {report}: exists; pass --force to replace it")
+    assert not out.exists() and report.read_text() == "{}"
+    result = run_cli("sound", "fit", measurements, "-o", out, "--json", report, "--force")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(report.read_text())["rows"] == 16
+    # Refused before the (missing) recording is read.
+    result = run_cli("sound", "loop", tmp_path / "missing.wav", "-o", out)
+    assert_clean_failure(result, f"{out}: exists; pass --force to replace it")
+    result = run_cli("sound", "render", "--sound", tmp_path / "missing.wav", "--trajectory",
+                     measurements, "-o", out)
+    assert_clean_failure(result, f"{out}: exists; pass --force to replace it")
+    result = run_cli("sound", "fit", measurements, "-o", measurements, "--force")
+    assert_clean_failure(result, "would replace the measurements itself")
+
+
+def test_export_refuses_an_existing_output_or_companion_unless_forced(tmp_path):
+    out = tmp_path / "pen.ahap"
+    assert run_cli("export", "pencil", "--format", "ahap", "-o", out).returncode == 0
+    companion = tmp_path / "pen-sound.wav"
+    assert companion.exists()
+    before = out.read_bytes()
+    out.write_text("mine")
+    result = run_cli("export", "pencil", "--format", "ahap", "-o", out)
+    assert_clean_failure(result, f"{out}: exists; pass --force to replace it")
+    assert out.read_text() == "mine"
+    out.unlink()
+    result = run_cli("export", "pencil", "--format", "ahap", "-o", out)  # the sound is still there
+    assert_clean_failure(result, f"{companion}: exists; pass --force to replace it")
+    assert not out.exists()
+    result = run_cli("export", "pencil", "--format", "ahap", "-o", out, "--force")
+    assert result.returncode == 0, result.stderr
+    assert out.read_bytes() == before
+
+
+# --- profile build: where the profile went, --install ----------------------------------------
+
+@pytest.fixture
+def recordings(tmp_path):
+    from realpen.pens.build import write_model_recordings
+
+    return write_model_recordings("pencil", tmp_path)
+
+
+def test_profile_build_says_where_and_install_puts_it_in_the_profiles_folder(
+        tmp_path, recordings, monkeypatch):
+    vibration, sound = recordings
+    home = tmp_path / "home"
+    monkeypatch.setenv("REALPEN_HOME", str(home))
+    monkeypatch.chdir(tmp_path)
+    common = ["profile", "build", "--name", "mine", "--vibration", vibration, "--sound", sound]
+    result = run_cli(*common, "-o", "bundle")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith(f"wrote {(tmp_path / 'bundle').resolve()}: ")
+    result = run_cli(*common, "-o", "bundle")
+    assert_clean_failure(result, "bundle: exists; pass --force to replace it")
+    assert run_cli(*common, "-o", "bundle", "--force").returncode == 0
+    installed = home / "profiles" / "mine"
+    result = run_cli(*common, "--install")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith(f"wrote {installed.resolve()}: ")
+    assert (installed / "profile.json").exists()
+    listing = run_cli("profile", "list")
+    assert listing.returncode == 0 and "mine" in listing.stdout
+    assert_clean_failure(run_cli(*common, "--install"), f"{installed}: exists; pass --force")
+    assert_clean_failure(run_cli(*common, "--install", "-o", "x"), "either -o/--output or --install")
+    assert_clean_failure(run_cli(*common), "either -o/--output or --install")
+    # One name, two parameters: the tactile unit and the sound's loop unit.
+    result = run_cli(*common, "-o", "other", "--sound-unit-ms", "0")
+    assert_clean_failure(result, "realpen: error: --sound-unit-ms: ")
+    result = run_cli(*common, "-o", "other", "--unit-ms", "0", "--top", "5", "--subpatterns", "15")
+    assert_clean_failure(result, "realpen: error: --unit-ms: ")
+    result = run_cli("profile", "build", "--name", "../up", "--vibration", vibration, "--sound",
+                     sound, "--install")
+    assert_clean_failure(result, "realpen: error: --name: '../up' is not a valid profile name")
+    assert sorted(p.name for p in (home / "profiles").iterdir()) == ["mine"]
