@@ -58,20 +58,60 @@ def test_every_display_function_is_listed():
         assert callable(getattr(display, name)), name
 
 
-def test_import_is_light_and_the_websocket_schema_needs_no_scipy():
-    code = """
-import json, sys
+IMPORT_CHECKS = """
+import contextlib, io, json, sys
+
+def loaded(*names):
+    return sorted(n for n in names if n in {m.split(".")[0] for m in sys.modules})
+
+state = {}
 import realpen
-light = sorted(m for m in ("numpy", "scipy", "matplotlib", "soundfile", "pydantic")
-               if m in sys.modules)
+state["realpen"] = loaded("numpy", "scipy", "matplotlib", "soundfile", "pydantic")
+import realpen.profile.schema
+state["profile.schema"] = loaded("scipy", "soundfile")
 import realpen.live.messages
-print(json.dumps({"after_realpen": light, "messages_scipy": "scipy" in sys.modules}))
+state["live.messages"] = loaded("scipy", "soundfile")
+from realpen.cli import main
+with contextlib.redirect_stdout(io.StringIO()) as usage:
+    try:
+        main(["--help"])
+    except SystemExit:
+        pass
+state["help"] = loaded("scipy", "soundfile", "matplotlib", "fastapi", "uvicorn")
+state["help_printed"] = "Usage: realpen" in usage.getvalue()
+import realpen.display
+state["display_pyplot"] = "matplotlib.pyplot" in sys.modules
+
+# The user picked a backend and made a pyplot figure; drawing with realpen.display keeps both.
+import matplotlib
+matplotlib.use("svg")
+import matplotlib.pyplot as plt
+user = plt.figure()
+rc_before = {k: str(v) for k, v in matplotlib.rcParams.items()}
+realpen.display.plot_actuator("lra:f0=175,q=8")
+rc_after = {k: str(v) for k, v in matplotlib.rcParams.items()}
+state["backend"] = matplotlib.get_backend()
+state["figures"] = plt.get_fignums()
+state["rc_changed"] = sorted(k for k in rc_before if rc_before[k] != rc_after[k])
+print(json.dumps(state))
 """
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120)
+
+
+def test_imports_stay_light_and_display_changes_no_global_state():
+    """One fresh interpreter, step by step: what each import pulls in, and matplotlib's state.
+
+    ``import realpen`` loads nothing heavy; the profile and WebSocket schemas load neither scipy
+    nor soundfile; ``realpen --help`` loads no scipy, soundfile, matplotlib or FastAPI (so it
+    answers at once); ``realpen.display`` imports no pyplot and, drawing, leaves the user's
+    backend, figures and rcParams as they were.
+    """
+    done = subprocess.run([sys.executable, "-c", IMPORT_CHECKS], capture_output=True,
+                          text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     state = json.loads(done.stdout)
-    assert state == {"after_realpen": [], "messages_scipy": False}
+    assert state == {"realpen": [], "profile.schema": [], "live.messages": [], "help": [],
+                     "help_printed": True, "display_pyplot": False, "backend": "svg",
+                     "figures": [1], "rc_changed": []}
 
 
 def positional_parameters(function) -> list[str]:

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-
 import matplotlib
 import numpy as np
 import pytest
@@ -51,42 +47,6 @@ def no_new_pyplot_figures():
 
 def own_axes(count: int) -> list[Axes]:
     return list(Figure().subplots(count, 1, squeeze=False)[:, 0])
-
-
-def test_import_changes_no_global_matplotlib_state():
-    # A fresh interpreter: the user picked a backend and made a pyplot figure before
-    # importing realpen.display and drawing with it.
-    code = """
-import json, sys
-import matplotlib
-matplotlib.use("svg")
-import matplotlib.pyplot as plt
-user = plt.figure()
-rc_before = {k: str(v) for k, v in matplotlib.rcParams.items()}
-backend, figures = matplotlib.get_backend(), plt.get_fignums()
-import realpen.display as display
-imported = (matplotlib.get_backend(), plt.get_fignums())
-display.plot_actuator("lra:f0=175,q=8")
-rc_after = {k: str(v) for k, v in matplotlib.rcParams.items()}
-print(json.dumps({"backend": [backend, imported[0], matplotlib.get_backend()],
-                  "figures": [figures, imported[1], plt.get_fignums()],
-                  "rc_changed": sorted(k for k in rc_before if rc_before[k] != rc_after[k])}))
-"""
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120)
-    assert done.returncode == 0, done.stderr
-    state = json.loads(done.stdout)
-    assert state["backend"] == ["svg", "svg", "svg"]
-    assert state["figures"] == [[1], [1], [1]]
-    assert state["rc_changed"] == []
-
-
-def test_importing_display_imports_no_pyplot():
-    done = subprocess.run([sys.executable, "-c", "import sys, realpen.display; "
-                           "print('matplotlib.pyplot' in sys.modules)"],
-                          capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "False"
 
 
 def test_plot_analysis_draws_into_the_given_ax(analysis, no_new_pyplot_figures):
