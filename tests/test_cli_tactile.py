@@ -123,6 +123,10 @@ def test_analyze_bad_input_too(tmp_path):
 def test_condition_and_explicit_counts_conflict(tmp_path):
     result = run_cli("tactile", EXAMPLE, "--condition", "A", "--top", "7", "-o", tmp_path / "x.wav")
     assert_clean_failure(result, "--top")
+    result = run_cli("tactile", EXAMPLE, "--condition", "E", "--unit-ms", "100", "-o",
+                     tmp_path / "x.wav")
+    assert_clean_failure(result, "--unit-ms: condition E sets 1500, not 100")
+    assert "unit_ms" not in result.stderr
 
 
 def good_recording(tmp_path):

@@ -173,6 +173,9 @@ def test_resample_refuses_a_rate_that_breaks_the_loop():
         resample_loop(np.zeros(12000), 8000, 44101)
     with pytest.raises(ParameterError, match="^rate: must be a positive"):
         resample_loop(np.zeros(12000), 8000, 0)
+    # An absurd rate is a one-line error, not a 30 GB allocation.
+    with pytest.raises(ParameterError, match="^rate: must be <= 384000 Hz"):
+        resample_loop(np.zeros(12000), 8000, 10 ** 9)
 
 
 def test_wav_stereo_puts_sound_left_and_tactile_right(pens):

@@ -209,6 +209,14 @@ def test_synthetic_file_round_trip(synthetic):
     assert np.all(synthesize(s, 0.0, 0.0, 0.5).samples == 0.0)  # variance 0 at rest
 
 
+def test_reprs_are_one_short_line(synthetic):
+    s = load_hatt(synthetic)
+    for obj in (s, s.models[0], s.model_at(50.0, 1.0)):
+        text = repr(obj)
+        assert "\n" not in text and len(text) < 200, text[:300]
+    assert repr(s).startswith("HattModelSet('Synthetic', 5 models at 1000 Hz")
+
+
 def test_ar_only_models_are_accepted(tmp_path):
     path = tmp_path / "Models_AR.xml"
     path.write_text(re.sub(r"<(MAcoeff|MAlsf|gain)>.*?</\1>", "", synthetic_xml()))

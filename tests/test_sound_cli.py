@@ -1,4 +1,4 @@
-"""``realpen sound loop | render | fit`` run as a user runs them, in a subprocess."""
+"""``realpen sound loop | render | fit`` run as a user runs them, in-process (:func:`conftest.run_cli`)."""
 
 from __future__ import annotations
 
@@ -297,6 +297,13 @@ def test_sound_loop_refuses_bad_options(tmp_path, recording, args, problem):
     done = realpen("sound", "loop", recording.name, "-o", "loop.wav", *args, cwd=tmp_path)
     assert done.returncode == 2 and problem in done.stderr and "Traceback" not in done.stderr
     assert {p.name for p in tmp_path.iterdir()} == before
+
+
+def test_a_crossfade_longer_than_the_unit_is_refused_naming_flags_only(tmp_path, recording):
+    done = realpen("sound", "loop", recording.name, "-o", "loop.wav", "--crossfade-ms", "400",
+                   cwd=tmp_path)
+    assert done.returncode == 2 and "--crossfade-ms" in done.stderr
+    assert "unit_ms" not in done.stderr and "(300 ms)" in done.stderr
 
 
 @pytest.mark.skipif(not ROUGH_PAPER.exists(),

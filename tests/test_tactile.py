@@ -8,7 +8,7 @@ import pytest
 from scipy import signal
 from signals import fit_amplitudes, sines
 
-from realpen.errors import ParameterError
+from realpen.errors import ParameterError, RealPenError
 from realpen.examples import example_recording_path
 from realpen.io.recording import Recording, load_recording
 from realpen.tactile.actuator import parse_actuator
@@ -157,6 +157,26 @@ def test_output_rate_too_low(tones_recording):
     assert info.value.parameter == "rate"
 
 
+def test_render_refuses_a_rate_beyond_the_maximum():
+    pattern = TactilePattern([[Component(175.0, 0.5)]])
+    with pytest.raises(ParameterError, match="^rate: must be <= 384000"):
+        pattern.render(10 ** 9)
+    with pytest.raises(ParameterError, match="^rate: must be <= 384000"):
+        TactilePattern([[Component(175.0, 0.5)]], rate=10 ** 9)
+
+
+def test_a_selected_unit_without_peaks_is_a_data_error_naming_the_recording():
+    # Every other 100 ms unit is silent: a selected unit has no peaks to synthesise.
+    n = int(round(0.1 * RATE))
+    x = np.sin(2 * np.pi * 180 * np.arange(30 * n) / RATE)
+    for unit in range(1, 30, 2):
+        x[unit * n:(unit + 1) * n] = 0.0
+    recording = Recording(x, RATE, ("z",), source="gappy")
+    with pytest.raises(RealPenError, match="^gappy: no spectral peaks in selected unit") as info:
+        build_pattern(recording, "flat", selection="middle")
+    assert not isinstance(info.value, ParameterError)
+
+
 def test_persistent_tones_do_not_dip_at_crossfades():
     # Two steady tones (and a little noise) persist through every unit: their amplitudes in
     # the pattern must stay steady across every boundary and the loop wrap.
@@ -221,7 +241,7 @@ def test_condition_sets_its_counts():
     assert TactileParams.resolve(None).condition == "B"
     seven = TactileParams.resolve(None, top=7)
     assert seven.top == 7 and seven.condition is None
-    with pytest.raises(ParameterError, match="^top: condition A sets top=5, not 7"):
+    with pytest.raises(ParameterError, match="^top: condition A sets 5, not 7"):
         TactileParams.resolve("A", top=7)
 
 
@@ -229,6 +249,7 @@ def test_condition_sets_its_counts():
     ({"unit_ms": -1}, "unit_ms"), ({"top": 0}, "top"), ({"subpatterns": 0}, "subpatterns"),
     ({"crossfade_ms": 200}, "crossfade_ms"), ({"cap_db": float("nan")}, "cap_db"),
     ({"rate": 0}, "rate"), ({"seed": -1}, "seed"), ({"boundary": "soft"}, "boundary"),
+    ({"rate": 10 ** 9}, "rate"),
     ({"amplitude": "cubic"}, "amplitude"), ({"selection": "best"}, "selection"),
     ({"highpass_hz": -3}, "highpass_hz"), ({"analysis_rate": 0}, "analysis_rate"),
     ({"condition": "Z"}, "condition"), ({"unit_ms": 150, "selection_unit_ms": 100},
@@ -405,7 +426,9 @@ MODULES = ["realpen.tactile", "realpen.tactile.actuator", "realpen.tactile.patte
            "realpen.exports.c_header", "realpen.exports.ahap", "realpen.exports.haptic",
            "realpen.exports.android", "realpen.exports.hjif", "realpen.exports.envelope",
            "realpen.pens", "realpen.pens.build", "realpen.pens.model", "realpen.live.catalog",
-           "realpen.live.device"]
+           "realpen.live.device", "realpen.io.recording", "realpen.io.paths",
+           "realpen.dsp.filters", "realpen.dsp.spectrum", "realpen.dsp.tracks",
+           "realpen.datasets.hatt"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -32,8 +32,10 @@ from realpen.errors import ParameterError, fail, require_number
 from realpen.io.files import check_readable_file, sha256_of
 from realpen.io.recording import Recording
 
+__all__ = ["ArmaModel", "HattModelSet", "load_hatt", "synthesize", "lsf_to_poly"]
 
-@dataclass(frozen=True, eq=False)
+
+@dataclass(frozen=True, eq=False, repr=False)
 class ArmaModel:
     """One ARMA texture model.
 
@@ -55,6 +57,10 @@ class ArmaModel:
     gain: float
     speed: float
     force: float
+
+    def __repr__(self) -> str:
+        return (f"ArmaModel(AR({len(self.ar) - 1}) MA({len(self.ma) - 1}) at {self.speed:g} mm/s, "
+                f"{self.force:g} N, variance {self.variance:.3g}, gain {self.gain:.3g})")
 
     def output_variance(self) -> float:
         """Theoretical variance of the synthesised acceleration, (m/s²)²: ``var · Σ h[n]²``,
@@ -94,7 +100,7 @@ def _decay_length(ar: np.ndarray, tolerance: float = 1e-12) -> int:
     return int(min(max(16, math.ceil(steps)), 1_000_000))
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class HattModelSet:
     """All models of one HaTT texture.
 
@@ -119,6 +125,11 @@ class HattModelSet:
     models: tuple[ArmaModel, ...]
     source: str = "memory"
     sha256: str | None = None
+
+    def __repr__(self) -> str:
+        return (f"HattModelSet({self.material!r}, {len(self.models)} models at {self.rate:g} Hz, "
+                f"speed to {self.max_speed:g} mm/s, force to {self.max_force:g} N, "
+                f"from {Path(self.source).name})")
 
     def model_at(self, speed_mm_s: float, force_n: float) -> ArmaModel:
         """The model at (speed mm/s, force N), clamped into range and blended as the toolkit does.

@@ -15,6 +15,8 @@ from scipy import signal
 from realpen.errors import ParameterError, fail, require_choice, require_number
 from realpen.io.recording import AXIS_CHOICES, Recording
 
+__all__ = ["dft321", "combine_axes", "resample", "highpass", "prepare", "SILENCE_DB"]
+
 
 def dft321(samples: np.ndarray) -> np.ndarray:
     """Combine axes into one signal by DFT321 (Landin et al., 2010).

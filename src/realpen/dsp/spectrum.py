@@ -18,6 +18,9 @@ from scipy.ndimage import maximum_filter1d
 
 from realpen.errors import RealPenError, fail, require_choice, require_number
 
+__all__ = ["Analysis", "analyze", "principal_frequencies", "select_units", "fft_size",
+           "ProgressCallback", "SELECTIONS", "FEATURE_BANDS", "PEAK_FLOOR_DB"]
+
 ProgressCallback = Callable[[int, int], None]
 SELECTIONS = ("stationary", "middle")
 FEATURE_BANDS = 24
@@ -116,7 +119,7 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
     unit_samples = int(round(unit_ms * rate / 1000.0))
     if unit_samples < 8:
         raise fail(source, f"{unit_ms:g} ms units are only {unit_samples} samples at {rate:g} Hz; "
-                           f"record faster or use longer units (unit_ms)")
+                           f"record faster or use longer units")
     count = len(x) // unit_samples
     nyquist = rate / 2
     fmax = nyquist if fmax is None else min(fmax, nyquist)

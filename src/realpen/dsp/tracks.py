@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["link_components", "continuous_phases", "joins"]
+
 
 def link_components(frequencies: list[np.ndarray], tolerance_hz: float,
                     cyclic: bool = True) -> list[np.ndarray]:

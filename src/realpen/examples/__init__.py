@@ -1,4 +1,7 @@
-"""Example data that ships with RealPen (synthetic; see ``scripts/make_example_recording.py``)."""
+"""Example data that ships with RealPen (synthetic; see ``scripts/make_example_recording.py``).
+
+May import: the standard library only (it hands out paths; the readers live in :mod:`realpen.io`).
+"""
 
 from importlib.resources import files
 from pathlib import Path

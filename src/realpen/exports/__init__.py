@@ -47,7 +47,6 @@ FORMATS: dict[str, ModuleType] = {
     "android": android,
     "hjif": hjif,
 }
-_INPUTS = ("pattern", "sound", "coupling", "name", "tool", "version")
 
 
 def _ahap_path_options(path: Path) -> dict:

@@ -9,6 +9,7 @@ import numpy as np
 
 from realpen.errors import ParameterError
 from realpen.tactile.pattern import TactilePattern
+from realpen.tactile.synthesis import MAX_RATE
 
 __all__ = ["Export", "MAX_REPEATS", "check_repeats", "check_pattern", "sound_samples",
            "resample_loop", "realpen_version", "title"]
@@ -125,6 +126,8 @@ def resample_loop(x: np.ndarray, rate: int, new_rate: int, what: str = "pattern"
 
     if isinstance(new_rate, bool) or int(new_rate) != new_rate or new_rate <= 0:
         raise ParameterError("rate", f"must be a positive whole number of Hz, got {new_rate}")
+    if new_rate > MAX_RATE:
+        raise ParameterError("rate", f"must be <= {MAX_RATE:g} Hz, got {new_rate:g}")
     new_rate = int(new_rate)
     if new_rate == rate:
         return np.asarray(x)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+__all__ = ["data_dir", "user_profiles_dir", "default_store"]
+
 
 def data_dir() -> Path:
     """The user's RealPen data folder.

@@ -22,6 +22,8 @@ from realpen.errors import ParameterError, fail, require_number
 from realpen.io.csvtable import read_csv
 from realpen.io.files import atomic_path, check_readable_file, sha256_of
 
+__all__ = ["Recording", "load_recording", "save_npz", "AXIS_CHOICES"]
+
 TIME_COLUMNS = ("t", "time", "timestamp")
 AXIS_CHOICES = ("dft321", "x", "y", "z", "magnitude")
 

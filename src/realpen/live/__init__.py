@@ -10,4 +10,9 @@ events. The pieces:
 - :mod:`~realpen.live.device` — the seam for the pen's own hardware and the simulated device;
 - :mod:`~realpen.live.catalog` — the profiles the server offers;
 - :mod:`~realpen.live.auth` — the ``--lan`` token, Host and Origin checks.
+
+May import: any library layer below it (:mod:`realpen.io`, :mod:`realpen.profile`,
+:mod:`realpen.exports`, :mod:`realpen.pens`, ...), never :mod:`realpen.cli`. Routes and
+lifecycle only: what a message does to a pen or a sound is computed in the library.
+:mod:`~realpen.live.messages` imports pydantic and :mod:`realpen.io.strokes` only.
 """

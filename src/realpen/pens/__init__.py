@@ -4,6 +4,11 @@ The bundled profiles are *modelled*, not recorded: see :mod:`realpen.pens.model`
 ``docs/pen-model.md``. ``scripts/make_bundled_pens.py`` regenerates them; on another machine
 the floats may differ in their last bits, so they regenerate equal within tolerances and with
 the same canonical version (see ``tests/test_profile.py``).
+
+May import: this ``__init__`` imports nothing of RealPen (the profile registry asks it where the
+bundled folder is); :mod:`~realpen.pens.model` imports :mod:`realpen.io`;
+:mod:`~realpen.pens.build` also :mod:`realpen.tactile`, :mod:`realpen.sound` and
+:mod:`realpen.profile`.
 """
 
 from __future__ import annotations

@@ -558,7 +558,7 @@ def _check_lengths(unit_ms, crossfade_ms, edge_ms, length, fade, edge) -> None:
                                              f"{crossfade_ms:g}")
     if fade >= length:
         raise ParameterError("crossfade_ms", f"must be between 0 and the unit length "
-                                             f"(unit_ms = {unit_ms:g}), got {crossfade_ms:g}")
+                                             f"({unit_ms:g} ms), got {crossfade_ms:g}")
     if 3 * edge > length:
         raise ParameterError("unit_ms", f"must be at least {3 * edge_ms:g} ms so head and tail "
                                         f"({edge_ms:g} ms each) can be compared, got {unit_ms:g}")

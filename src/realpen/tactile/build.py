@@ -68,7 +68,13 @@ def _subpattern_peaks(mono: np.ndarray, rate: float, analysis, params: TactilePa
     """(frequencies Hz, powers) per sub-pattern, strongest first."""
     per = params.units_per_subpattern
     if per == 1:
-        return [analysis.unit(int(unit)) for unit in analysis.selected]
+        peaks = [analysis.unit(int(unit)) for unit in analysis.selected]
+        for unit, (freqs, _) in zip(analysis.selected, peaks):
+            if not len(freqs):
+                raise fail(source, f"no spectral peaks in selected unit {int(unit)} (at "
+                                   f"{float(analysis.starts_s[unit]):.2f} s); it is silent "
+                                   f"in the analysed band")
+        return peaks
     unit_samples = int(round(params.selection_unit_ms * rate / 1000.0))
     peaks = []
     for index in range(params.subpatterns):

@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 
 from realpen.errors import ParameterError, require_choice, require_number
-from realpen.tactile.synthesis import BOUNDARIES
+from realpen.tactile.synthesis import BOUNDARIES, MAX_RATE
 
 __all__ = ["CONDITIONS", "SELECTION_UNIT_MS", "AMPLITUDE_MODES", "SELECTIONS", "TactileParams"]
 
@@ -65,7 +65,7 @@ class TactileParams:
         >>> TactileParams(condition="D", top=10)
         Traceback (most recent call last):
         ...
-        realpen.errors.ParameterError: top: condition D sets top=5, not 10 (give the condition or the counts)
+        realpen.errors.ParameterError: top: condition D sets 5, not 10 (give the condition or the counts)
 
     Raises:
         ParameterError: any bad value, named by its parameter.
@@ -108,7 +108,7 @@ class TactileParams:
             else:
                 require_number(name, value, minimum=1)
             if condition is not None and value != preset[name]:
-                raise ParameterError(name, f"condition {condition} sets {name}={preset[name]:g}, "
+                raise ParameterError(name, f"condition {condition} sets {preset[name]:g}, "
                                            f"not {value:g} (give the condition or the counts)")
         if int(self.top) != self.top:
             raise ParameterError("top", f"must be a whole number, got {self.top:g}")
@@ -134,7 +134,7 @@ class TactileParams:
             raise ParameterError("selection_unit_ms", f"unit_ms ({self.unit_ms:g}) must be a whole "
                                                       f"multiple of it, got "
                                                       f"{self.selection_unit_ms:g}")
-        require_number("rate", self.rate, minimum=0, inclusive=False)
+        require_number("rate", self.rate, minimum=0, inclusive=False, maximum=MAX_RATE)
         if int(self.rate) != self.rate:
             raise ParameterError("rate", f"must be a whole number of Hz, got {self.rate:g}")
         object.__setattr__(self, "rate", int(self.rate))

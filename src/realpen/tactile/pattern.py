@@ -33,7 +33,7 @@ import numpy as np
 from realpen.errors import ParameterError, require_choice, require_number
 from realpen.tactile.actuator import Actuator
 from realpen.tactile.conditions import TactileParams
-from realpen.tactile.synthesis import BOUNDARIES, subpattern_samples, synthesize
+from realpen.tactile.synthesis import BOUNDARIES, MAX_RATE, subpattern_samples, synthesize
 
 if TYPE_CHECKING:
     from realpen.dsp.spectrum import Analysis
@@ -226,7 +226,7 @@ class TactilePattern:
                                                     f"component")
             subpatterns.append(tuple(Component.from_json(c) for c in sub))
         set_(self, "subpatterns", tuple(subpatterns))
-        require_number("rate", self.rate, minimum=0.0, inclusive=False)
+        require_number("rate", self.rate, minimum=0.0, inclusive=False, maximum=MAX_RATE)
         if int(self.rate) != self.rate:
             raise ParameterError("rate", f"must be a whole number of Hz, got {self.rate:g}")
         set_(self, "rate", int(self.rate))
@@ -325,7 +325,7 @@ class TactilePattern:
                 frequency (the components would alias).
         """
         rate = self.rate if rate is None else rate
-        require_number("rate", rate, minimum=0.0, inclusive=False)
+        require_number("rate", rate, minimum=0.0, inclusive=False, maximum=MAX_RATE)
         if self.max_frequency_hz >= rate / 2:
             raise ParameterError("rate", f"{rate:g} Hz is too low for components up to "
                                          f"{self.max_frequency_hz:.0f} Hz (needs more than "

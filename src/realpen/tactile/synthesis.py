@@ -24,9 +24,10 @@ import numpy as np
 
 from realpen.errors import ParameterError, require_choice, require_number
 
-__all__ = ["BOUNDARIES", "synthesize", "subpattern_samples", "fade_samples", "component_arrays"]
+__all__ = ["BOUNDARIES", "MAX_RATE", "synthesize", "subpattern_samples", "fade_samples", "component_arrays"]
 
 BOUNDARIES = ("crossfade", "hard")
+MAX_RATE = 384_000  # Hz; the highest common audio rate (a pattern is synthesised whole)
 
 
 def subpattern_samples(rate: float, subpattern_ms: float) -> int:
