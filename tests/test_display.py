@@ -63,7 +63,7 @@ def test_plot_analysis_draws_into_the_given_ax(analysis, no_new_pyplot_figures):
 def test_plot_actuator_draws_response_and_capped_weighting(no_new_pyplot_figures):
     axes = own_axes(2)
     response, weighting = display.plot_actuator(rp.parse_actuator("lra:f0=175,q=8"),
-                                                band=(30, 500), cap_db=20, axes=axes)
+                                                band=(30, 500), cap_db=20, ax=axes)
     assert [response, weighting] == axes
     freqs, weights_db = weighting.get_lines()[1].get_data()
     assert np.max(weights_db) == pytest.approx(20.0)  # the cap
@@ -76,13 +76,13 @@ def test_plot_actuator_accepts_a_spec_and_refuses_bad_band():
     assert isinstance(response.figure, Figure)
     with pytest.raises(rp.ParameterError, match="^band:"):
         display.plot_actuator("flat", band=(500, 30))
-    with pytest.raises(rp.ParameterError, match="^axes:"):
-        display.plot_actuator("flat", axes=own_axes(1))
+    with pytest.raises(rp.ParameterError, match="^ax:"):
+        display.plot_actuator("flat", ax=own_axes(1))
 
 
 def test_plot_pattern_marks_subpattern_boundaries(pattern, no_new_pyplot_figures):
     axes = own_axes(2)
-    wave, spectrogram = display.plot_pattern(pattern, axes=axes)
+    wave, spectrogram = display.plot_pattern(pattern, ax=axes)
     assert [wave, spectrogram] == axes
     boundaries = [line.get_xdata()[0] for line in wave.get_lines()[1:]]
     assert boundaries == pytest.approx(np.arange(1, 15) * 100.0)
@@ -92,14 +92,25 @@ def test_plot_pattern_marks_subpattern_boundaries(pattern, no_new_pyplot_figures
 
 def test_plot_pattern_one_view_into_one_ax(pattern, no_new_pyplot_figures):
     (ax,) = own_axes(1)
-    assert display.plot_pattern(pattern, axes=ax, views="spectrogram") == [ax]
+    assert display.plot_pattern(pattern, ax=ax, views="spectrogram") == [ax]
     with pytest.raises(rp.ParameterError, match="^views:"):
-        display.plot_pattern(pattern, axes=ax, views="waterfall")
+        display.plot_pattern(pattern, ax=ax, views="waterfall")
+
+
+def test_one_view_of_each_two_panel_plot_into_one_ax(loop, no_new_pyplot_figures):
+    (ax,) = own_axes(1)
+    assert display.plot_actuator("lra:f0=175,q=8", ax, views="weighting") == [ax]
+    assert ax.get_ylabel() == "weight (dB)"
+    (ax,) = own_axes(1)
+    assert display.plot_sound_loop(loop, ax, views="spectrogram") == [ax]
+    assert ax.get_ylabel() == "frequency (kHz)"
+    with pytest.raises(rp.ParameterError, match="^views:"):
+        display.plot_sound_loop(loop, ax, views="waterfall")
 
 
 def test_plot_sound_loop_marks_the_wrap(loop, no_new_pyplot_figures):
     axes = own_axes(2)
-    wave, spectrogram = display.plot_sound_loop(loop, axes=axes, periods=2)
+    wave, spectrogram = display.plot_sound_loop(loop, ax=axes, periods=2)
     period_ms = len(loop.samples) / loop.rate * 1000
     wraps = [line.get_xdata()[0] for line in spectrogram.get_lines()]
     assert wraps == pytest.approx([period_ms])

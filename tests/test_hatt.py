@@ -260,6 +260,7 @@ def test_bad_synthesis_parameters(synthetic):
     s = load_hatt(synthetic)
     for args, kwargs, parameter in (((100.0, 1.0, 0.0), {}, "duration_s"),
                                     ((100.0, 1.0, 1e-4), {}, "duration_s"),
+                                    ((100.0, 1.0, 1e9), {}, "duration_s"),
                                     ((100.0, float("nan"), 1.0), {}, "force_n"),
                                     ((float("inf"), 1.0, 1.0), {}, "speed_mm_s"),
                                     ((np.ones(3), 1.0, 1.0), {}, "speed_mm_s"),
@@ -327,6 +328,7 @@ def test_cli_hatt_synth_writes_a_recording_that_realpen_reads(hatt_dir, tmp_path
 @pytest.mark.parametrize("options, message", [
     (["--seconds", "0"], "--seconds: must be > 0, got 0"),
     (["--seconds", "nan"], "--seconds: must be a finite number"),
+    (["--seconds", "1e9"], "--seconds: must be <= 86400"),
     (["--speed", "inf"], "--speed: must be finite"),
     (["--force", "nan"], "--force: must be finite"),
     (["--seed", "-1"], "--seed: must be a whole number >= 0"),

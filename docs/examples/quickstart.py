@@ -49,7 +49,7 @@ print("first sub-pattern of B:", pattern_b.subpatterns[0][0], "...")
 figure = Figure(figsize=(9, 7), layout="constrained")
 top, bottom = figure.subplots(2, 1)
 rp.display.plot_analysis(analysis, ax=top)
-rp.display.plot_pattern(pattern_b, axes=bottom, views="spectrogram")
+rp.display.plot_pattern(pattern_b, ax=bottom, views="spectrogram")
 bottom.set_title("pattern B (condition B, lra:f0=175,q=8): spectrogram over one loop")
 figure.savefig(out / "quickstart.png", dpi=120)
 

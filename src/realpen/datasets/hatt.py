@@ -32,7 +32,9 @@ from realpen.errors import ParameterError, fail, require_number
 from realpen.io.files import check_readable_file, sha256_of
 from realpen.io.recording import Recording
 
-__all__ = ["ArmaModel", "HattModelSet", "load_hatt", "synthesize", "lsf_to_poly"]
+__all__ = ["ArmaModel", "HattModelSet", "load_hatt", "synthesize", "lsf_to_poly", "MAX_DURATION_S"]
+
+MAX_DURATION_S = 86_400.0  # longest synthesis, in seconds (one day)
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -279,11 +281,13 @@ def synthesize(model_set: HattModelSet, speed_mm_s: float | np.ndarray, force_n:
         stationary from its first sample (a filter warm-up is discarded).
 
     Raises:
-        ParameterError: a ``duration_s`` shorter than one sample, a negative or non-integer
+        ParameterError: a ``duration_s`` shorter than one sample or longer than
+            :data:`MAX_DURATION_S`, a negative or non-integer
             ``seed``, a non-positive ``update_s``, or a speed or force that is not finite or
             not one number per output sample.
     """
-    require_number("duration_s", duration_s, minimum=0.0, inclusive=False)
+    # One day at 1 kHz is 86.4 M samples (0.7 GB as float64): longer is a typo, not a recording.
+    require_number("duration_s", duration_s, minimum=0.0, maximum=MAX_DURATION_S, inclusive=False)
     frames = int(round(duration_s * model_set.rate))
     if frames < 1:
         raise ParameterError("duration_s", f"must give at least one sample at "

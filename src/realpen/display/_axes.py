@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 
 from realpen.errors import ParameterError
 
-__all__ = ["new_axes", "axes_list", "db", "cyclic_spectrogram", "side_colorbar", "hz_ticks"]
+__all__ = ["new_axes", "axes_list", "check_views", "db", "cyclic_spectrogram", "side_colorbar", "hz_ticks"]
 
 _TINY = 1e-30
 
@@ -37,6 +37,17 @@ def axes_list(axes: Axes | Sequence[Axes] | None, count: int, figsize: tuple[flo
         raise ParameterError(parameter, f"needs {count} matplotlib Axes, got {len(given)} "
                                         f"object(s)")
     return given
+
+
+def check_views(views: str | Sequence[str], known: tuple[str, ...]) -> tuple[str, ...]:
+    """The requested panels as a tuple, each one of ``known``; one name alone is one view."""
+    views = (views,) if isinstance(views, str) else tuple(views)
+    if not views:
+        raise ParameterError("views", "needs at least one view")
+    for view in views:
+        if view not in known:
+            raise ParameterError("views", f"unknown view {view!r} (choose from {', '.join(known)})")
+    return views
 
 
 def db(power: np.ndarray, reference: float = 1.0) -> np.ndarray:

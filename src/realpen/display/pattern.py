@@ -7,8 +7,8 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 
-from realpen.display._axes import axes_list, cyclic_spectrogram, db, side_colorbar
-from realpen.errors import ParameterError, require_number
+from realpen.display._axes import axes_list, check_views, cyclic_spectrogram, db, side_colorbar
+from realpen.errors import require_number
 
 __all__ = ["plot_pattern", "VIEWS"]
 
@@ -22,8 +22,8 @@ def pattern_signal(pattern, rate: float | None = None) -> tuple[np.ndarray, floa
     return np.asarray(pattern.render(rate), dtype=np.float64).reshape(-1), float(rate)
 
 
-def plot_pattern(pattern, *, axes: Axes | Sequence[Axes] | None = None,
-                 views: Sequence[str] = VIEWS, rate: float | None = None,
+def plot_pattern(pattern, ax: Axes | Sequence[Axes] | None = None, *,
+                 views: str | Sequence[str] = VIEWS, rate: float | None = None,
                  fmax_hz: float | None = None, window_ms: float = 25.0) -> list[Axes]:
     """The looping pattern in time and as a spectrogram, sub-pattern boundaries marked.
 
@@ -35,7 +35,7 @@ def plot_pattern(pattern, *, axes: Axes | Sequence[Axes] | None = None,
     Args:
         pattern: a :class:`realpen.TactilePattern` (or anything with ``samples``, ``rate``,
             ``render(rate)``, ``subpattern_ms`` and ``max_frequency_hz``).
-        axes: one Axes per view; a single Axes draws one view. None makes a new figure (not a
+        ax: one Axes per view (a single Axes for a single view). None makes a new figure (not a
             pyplot one).
         views: which panels, in order: ``"time"`` and/or ``"spectrogram"``.
         rate: render the pattern at this rate in Hz (default: the pattern's own rate).
@@ -54,15 +54,9 @@ def plot_pattern(pattern, *, axes: Axes | Sequence[Axes] | None = None,
         >>> spectrogram.get_ylabel()
         'frequency (Hz)'
     """
-    views = (views,) if isinstance(views, str) else tuple(views)
-    for view in views:
-        if view not in VIEWS:
-            raise ParameterError("views", f"unknown view {view!r} (choose from "
-                                          f"{', '.join(VIEWS)})")
-    if not views:
-        raise ParameterError("views", "needs at least one view")
+    views = check_views(views, VIEWS)
     require_number("window_ms", window_ms, minimum=0.0, inclusive=False)
-    drawn = axes_list(axes, len(views), (8, 2.8 * len(views)))
+    drawn = axes_list(ax, len(views), (8, 2.8 * len(views)), "ax")
     x, rate = pattern_signal(pattern, rate)
     t_ms = np.arange(len(x)) / rate * 1000
     total_ms = len(x) / rate * 1000

@@ -57,12 +57,12 @@ def plot_sound_spectrum(samples: np.ndarray, rate: float, ax: Axes | None = None
     return ax
 
 
-def profile_figure(profile, *, axes: Sequence[Axes] | None = None) -> Figure:
+def profile_figure(profile, ax: Sequence[Axes] | None = None) -> Figure:
     """Three panels: tactile pattern (time), its spectrogram (to 700 Hz), sound unit spectrum.
 
     Args:
         profile: a :class:`realpen.profile.PenProfile` (see :func:`realpen.load_profile`).
-        axes: three Axes to draw into; None makes a new figure (not a pyplot one).
+        ax: three Axes to draw into; None makes a new figure (not a pyplot one).
 
     Returns:
         The figure of the (first) Axes.
@@ -74,8 +74,8 @@ def profile_figure(profile, *, axes: Sequence[Axes] | None = None) -> Figure:
         >>> len(figure.axes) >= 3
         True
     """
-    wave, spec, audio = axes_list(axes, 3, (9, 9))
-    plot_pattern(profile.pattern, axes=[wave, spec], fmax_hz=700.0)
+    wave, spec, audio = axes_list(ax, 3, (9, 9), "ax")
+    plot_pattern(profile.pattern, [wave, spec], fmax_hz=700.0)
     wave.set_title(f"{profile.name} — {wave.get_title()}, actuator {profile.actuator.spec}")
     sound, rate = _sound_of(profile)
     section = profile.meta.sound
