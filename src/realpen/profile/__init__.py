@@ -13,7 +13,7 @@ May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.dsp`,
 
 from __future__ import annotations
 
-import importlib
+from realpen._lazy import lazy_attributes
 
 __all__ = ["PenProfile", "load_profile", "save_profile", "build_profile", "list_profiles",
            "resolve_profile", "profile_locations", "ProfileMeta", "NAME_PATTERN"]
@@ -23,11 +23,4 @@ _HOMES = {"PenProfile": "bundle", "load_profile": "bundle", "save_profile": "bun
           "profile_locations": "registry", "ProfileMeta": "schema", "NAME_PATTERN": "schema"}
 
 
-def __getattr__(name: str):
-    if name in _HOMES:
-        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_attributes(__name__, _HOMES, __all__)

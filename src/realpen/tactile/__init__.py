@@ -18,7 +18,7 @@ the types, synthesis and conditions need numpy alone, so the profile schema stay
 
 from __future__ import annotations
 
-import importlib
+from realpen._lazy import lazy_attributes
 
 __all__ = ["Actuator", "parse_actuator", "weighting", "Component", "TactilePattern",
            "synthesize", "TactileParams", "CONDITIONS", "build_pattern", "tactile_pattern"]
@@ -29,11 +29,4 @@ _HOMES = {"Actuator": "actuator", "parse_actuator": "actuator", "weighting": "ac
           "build_pattern": "build", "tactile_pattern": "build"}
 
 
-def __getattr__(name: str):
-    if name in _HOMES:
-        return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_attributes(__name__, _HOMES, __all__)
