@@ -2,5 +2,5 @@
 
 from realpen.cli import main
 
-if __name__ == "__main__":  # importing (pytest --doctest-modules does) runs nothing
+if __name__ == "__main__":  # importing it (as doctest collection does) runs nothing
     main()

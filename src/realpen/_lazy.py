@@ -1,7 +1,7 @@
 """Lazy package attributes: a name is imported from its home module on first use.
 
 Packages keep their ``__init__`` free of imports so that a light module (the WebSocket schema,
-``realpen --help``) never pays for numpy, scipy or soundfile it does not use.
+the help of the ``realpen`` command) never pays for numpy, scipy or soundfile it does not use.
 """
 
 from __future__ import annotations

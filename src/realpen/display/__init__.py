@@ -10,7 +10,7 @@ pyplot figures. In a notebook, show a figure by making it the cell's value (``ax
 - :func:`plot_actuator` — actuator response |H(f)| and the capped weighting (Figure 2c–d).
 - :func:`plot_pattern` — a tactile pattern in time and its spectrogram (Figure 8).
 - :func:`plot_sound_loop` — a sound loop's waveform and spectrogram across its wrap.
-- :func:`profile_figure`, :func:`save_profile_plot` — a pen profile (``profile show --plot``).
+- :func:`profile_figure`, :func:`save_profile_plot` — a pen profile (the plot of ``realpen profile show``).
 
 May import: every library layer (io, dsp, tactile, sound, profile); never live or cli.
 """

@@ -1,5 +1,5 @@
 """Figures of a pen profile, like the method's Figure 8: the tactile pattern in time and as a
-spectrogram, and the spectrum of the friction-sound unit (``realpen profile show --plot``)."""
+spectrogram, and the spectrum of the friction-sound unit (the plot of ``realpen profile show``)."""
 
 from __future__ import annotations
 

@@ -68,7 +68,7 @@ class Analysis:
         return self.frequencies_hz[index][keep], self.powers[index][keep]
 
     def to_json(self) -> dict:
-        """The ``realpen analyze --json`` document."""
+        """The JSON report of ``realpen analyze``."""
         units = []
         for index, start in enumerate(self.starts_s):
             freqs, powers = self.unit(index)

@@ -12,7 +12,7 @@ start and end in sample frames (end inclusive: the last frame played before the 
 fraction 0, play count 0 (forever).
 
 soundfile and scipy are imported when first needed, so light modules (the WebSocket schema's
-neighbours, ``realpen --help``) do not load them.
+neighbours, the help of the ``realpen`` command) do not load them.
 """
 
 from __future__ import annotations

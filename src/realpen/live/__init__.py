@@ -9,7 +9,7 @@ events. The pieces:
 - :mod:`~realpen.live.store` — the SQLite stroke store and its CSV export;
 - :mod:`~realpen.live.device` — the seam for the pen's own hardware and the simulated device;
 - :mod:`~realpen.live.catalog` — the profiles the server offers;
-- :mod:`~realpen.live.auth` — the ``--lan`` token, Host and Origin checks.
+- :mod:`~realpen.live.auth` — the LAN token, Host and Origin checks.
 
 May import: any library layer below it (:mod:`realpen.io`, :mod:`realpen.profile`,
 :mod:`realpen.exports`, :mod:`realpen.pens`, ...), never :mod:`realpen.cli`. Routes and

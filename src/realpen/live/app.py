@@ -44,10 +44,10 @@ class LiveSettings:
 
     Attributes:
         store: the SQLite stroke store (None: :func:`realpen.paths.default_store`).
-        profiles: extra folders of profiles (``--profiles``), after the bundled and user ones.
+        profiles: extra folders of profiles, after the bundled and user ones.
         tactile: ``"audio"`` plays the tactile pattern on the right audio channel by default
             (the page can toggle it); ``"none"`` leaves touch to the pen's own device.
-        token: when set, every request must carry it (``--lan`` sets a random one).
+        token: when set, every request must carry it (LAN mode sets a random one).
         allowed_hosts: host names the ``Host`` header may name (None: any). Loopback-only
             serving passes :data:`~realpen.live.auth.LOOPBACK_HOSTS`.
         device: what pen commands drive (None: a new :class:`SimulatedDevice`).

@@ -1,6 +1,6 @@
-"""Who may talk to the live server: the ``--lan`` token, the Host and the Origin.
+"""Who may talk to the live server: the LAN token, the Host and the Origin.
 
-With a token (``--lan`` makes a random one), every HTTP request and WebSocket handshake must
+With a token (LAN mode makes a random one), every HTTP request and WebSocket handshake must
 carry it: as ``?token=…`` (the URL the server prints), as the ``realpen_token`` cookie (set on
 the first request that carried it, so the page's module imports and fetches need nothing more),
 or as ``Authorization: Bearer …``. Without it, HTTP gets 401 and a WebSocket handshake 403.

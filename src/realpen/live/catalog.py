@@ -1,4 +1,4 @@
-"""The pen profiles a live server offers: the bundled pens, the user's, and ``--profiles``."""
+"""The pen profiles a live server offers: the bundled pens, the user's, and extra folders."""
 
 from __future__ import annotations
 

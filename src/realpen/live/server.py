@@ -1,6 +1,6 @@
 """Running the live app under uvicorn: binding, the URL to print, a clean stop on Ctrl-C.
 
-The socket is bound before uvicorn starts, so ``--port 0`` (any free port) still prints the
+The socket is bound before uvicorn starts, so port 0 (any free port) still prints the
 real URL, and a port in use is one clear error. uvicorn handles SIGINT/SIGTERM: it stops
 accepting, closes the WebSockets (each page's open stroke is ended), then the app's shutdown
 closes the store, whose every stroke was committed as it was drawn.
@@ -65,7 +65,7 @@ def url_host(host: str) -> str:
 def run(app, sock: socket.socket, log_level: str = "warning") -> None:
     """Serve ``app`` on ``sock`` until SIGINT/SIGTERM; returns after a graceful shutdown.
 
-    The access log is off: with ``--lan`` every request line would carry the token.
+    The access log is off: in LAN mode every request line would carry the token.
     """
     config = uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="on",
                             ws_max_size=WS_MAX_FRAME, ws_per_message_deflate=False,

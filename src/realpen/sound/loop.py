@@ -712,7 +712,7 @@ class SoundLoop:
         write_wav(path, self.samples, int(round(self.rate)), loop=True)
 
     def to_json(self) -> dict:
-        """The ``realpen sound loop --json`` document (times in s, lengths in ms, levels in dB).
+        """The JSON report of ``realpen sound loop`` (times in s, lengths in ms, levels in dB).
 
         Both modes give ``mode``, ``source``, ``rate``, ``frames``, ``length_ms``, ``start_s``,
         ``end_s``, ``seam``, ``gain`` and ``rms_dbfs``; loop mode adds the unit, the crossfade

@@ -394,7 +394,7 @@ class TactilePattern:
         return cls(**data, **origin)
 
     def report(self) -> dict:
-        """The ``realpen tactile --json`` document: the pattern, its parameters, actuator,
+        """The JSON report of ``realpen tactile``: the pattern, its parameters, actuator,
         source and analysis, and notes."""
         from realpen import __version__
 
