@@ -78,6 +78,23 @@ def test_defaults_written_out_for_fast_help_agree_with_the_library():
         assert f"{key}={top}×{subpatterns}×{unit_ms:g}ms" in tactile_cmds.CONDITION_HELP
 
 
+def test_tactile_option_defaults_agree_with_the_library():
+    """analyze, tactile and profile build write TactileParams' defaults (condition B) out."""
+    from realpen.tactile.build import DEFAULT_ACTUATOR
+    from realpen.tactile.conditions import TactileParams
+
+    library = TactileParams()
+    commands = leaf_commands()
+    for path in ("analyze", "tactile", "profile build"):
+        for param in commands[path].params:
+            name = "selection" if param.name == "select" else param.name
+            if param.default is not None and hasattr(library, name):
+                assert param.default == getattr(library, name), (path, param.name)
+        if path != "analyze":
+            assert next(p.default for p in commands[path].params if p.name == "actuator") \
+                == DEFAULT_ACTUATOR, path
+
+
 # --- the one flag map ------------------------------------------------------------------------
 
 def test_every_mapped_flag_exists_on_a_command():

@@ -25,13 +25,7 @@ TactilePattern(15 sub-patterns × 100 ms, 10 components each, 8000 Hz, lra:f0=17
 
 from __future__ import annotations
 
-import importlib
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("realpen")
-except PackageNotFoundError:  # running from a source tree that was never installed
-    __version__ = "0.0.0+unknown"
+from realpen._lazy import lazy_attributes
 
 __all__ = [
     "__version__",
@@ -49,38 +43,28 @@ __all__ = [
     "display",
 ]
 
-# Names re-exported from the library, imported on first access (PEP 562).
-_LAZY: dict[str, str] = {
-    "Recording": "realpen.io.recording",
-    "load_hatt": "realpen.datasets.hatt",
-    "TactilePattern": "realpen.tactile.pattern",
-    "Actuator": "realpen.tactile.actuator",
-    "parse_actuator": "realpen.tactile.actuator",
-    "find_loop": "realpen.sound.loop",
-    "SoundLoop": "realpen.sound.loop",
-    "Coupling": "realpen.sound.coupling",
-    "load_profile": "realpen.profile.bundle",
-    "save_profile": "realpen.profile.bundle",
-    "list_profiles": "realpen.profile.registry",
-    "RealPenError": "realpen.errors",
-    "ParameterError": "realpen.errors",
+# Names re-exported from the library, imported on first access (PEP 562). The version too:
+# importlib.metadata is slower to import than the rest of `import realpen`.
+_HOMES: dict[str, str] = {
+    "__version__": "_version",
+    "Recording": "io.recording",
+    "load_hatt": "datasets.hatt",
+    "TactilePattern": "tactile.pattern",
+    "Actuator": "tactile.actuator",
+    "parse_actuator": "tactile.actuator",
+    "find_loop": "sound.loop",
+    "SoundLoop": "sound.loop",
+    "Coupling": "sound.coupling",
+    "load_profile": "profile.bundle",
+    "save_profile": "profile.bundle",
+    "list_profiles": "profile.registry",
+    "RealPenError": "errors",
+    "ParameterError": "errors",
 }
 _SUBPACKAGES = ("display", "io", "dsp", "tactile", "sound", "profile", "exports", "datasets",
                 "examples", "errors", "pens", "live", "cli")
 
-
-def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value  # the next access is a plain attribute lookup
-        return value
-    if name in _SUBPACKAGES:
-        return importlib.import_module(f"{__name__}.{name}")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_attributes(__name__, _HOMES, __all__, _SUBPACKAGES)
 
 
 def analyze(data, *, rate: float | None = None, unit_ms: float = 100.0, top: int = 10,
@@ -125,48 +109,14 @@ def analyze(data, *, rate: float | None = None, unit_ms: float = 100.0, top: int
     """
     from realpen.dsp.filters import prepare
     from realpen.dsp.spectrum import analyze as analyze_signal
+    from realpen.io.recording import as_recording
 
-    recording = _as_recording(data, rate)
+    recording = as_recording(data, rate)
     prepared = prepare(recording, axis, analysis_rate, highpass_hz)
     return analyze_signal(prepared.mono, prepared.rate, unit_ms, top, count, selection,
                           fmin=highpass_hz if fmin is None else fmin, fmax=fmax,
                           min_separation_hz=min_separation_hz, source=recording.source,
                           progress=progress)
-
-
-def _as_recording(data, rate: float | None):
-    """A :class:`Recording` as it is, or an array of shape (frames[, axes]) wrapped in one."""
-    import numpy as np
-
-    from realpen.errors import ParameterError, require_number
-    from realpen.io.recording import Recording
-
-    if isinstance(data, Recording):
-        if rate is not None and rate != data.rate:
-            raise ParameterError("rate", f"a Recording carries its own rate ({data.rate:g} Hz); "
-                                         f"give rate only with an array")
-        return data
-    if rate is None:
-        raise ParameterError("rate", "needed in Hz when the data is an array")
-    require_number("rate", rate, minimum=0.0, inclusive=False)
-    try:
-        samples = np.asarray(data, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ParameterError("data", f"must be a Recording or an array of numbers, not "
-                                     f"{type(data).__name__}") from None
-    if samples.ndim == 1:
-        samples = samples[:, None]
-    if samples.ndim != 2 or samples.shape[0] == 0:
-        raise ParameterError("data", f"must have shape (frames,) or (frames, axes), got "
-                                     f"{samples.shape}")
-    if samples.shape[1] > samples.shape[0]:
-        raise ParameterError("data", f"shape {samples.shape} has more axes than frames; "
-                                     f"pass (frames, axes), e.g. data.T")
-    if not np.all(np.isfinite(samples)):
-        raise ParameterError("data", "contains NaN or infinite values")
-    count = samples.shape[1]
-    axes = ("x", "y", "z")[:count] if count <= 3 else tuple(f"ch{i}" for i in range(count))
-    return Recording(samples, float(rate), axes, source="array")
 
 
 def load_recording(path, *, rate: float | None = None, units: str | None = None):

@@ -24,9 +24,9 @@ except ImportError:  # older typer uses click itself
 
 from realpen.errors import ParameterError, RealPenError
 
-__all__ = ["app", "main", "command_path", "CONTEXT_SETTINGS"]
+__all__ = ["app", "sub_app", "main", "command_path", "CONTEXT_SETTINGS"]
 
-# -h works wherever --help does; child contexts inherit it, the sub-apps repeat it to be plain.
+# -h works wherever --help does; child contexts inherit it, sub_app repeats it to be plain.
 CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"]}
 
 app = typer.Typer(
@@ -53,6 +53,14 @@ def _root(
                                  help="Print the version and exit."),
 ) -> None:
     """RealPen: the feel and sound of a real pen on paper, for touch screens."""
+
+
+def sub_app(name: str, help: str) -> typer.Typer:
+    """A group of subcommands, ``realpen NAME ...``, registered on :data:`app`; it prints its
+    help when given no subcommand."""
+    group = typer.Typer(help=help, no_args_is_help=True, context_settings=CONTEXT_SETTINGS)
+    app.add_typer(group, name=name)
+    return group
 
 
 def command_path(args: Sequence[str]) -> str:

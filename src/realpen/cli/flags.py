@@ -57,16 +57,12 @@ DEFAULT_FLAGS: dict[str, str] = {
     "value": "--value",
     # profiles and exports (realpen.profile, realpen.exports)
     "name": "--name",
-    "tool": "--tool",
     "fmt": "--format",
-    "format": "--format",
     "stereo": "--stereo",
     "repeats": "--repeats",
     # the live app (realpen.live)
-    "host": "--host",
     "port": "--port",
     "tactile": "--tactile",
-    "stroke": "--stroke",
     # HaTT texture models (realpen.datasets.hatt)
     "speed_mm_s": "--speed",
     "force_n": "--force",

@@ -10,17 +10,12 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import CONTEXT_SETTINGS, app
+from realpen.cli import sub_app
 from realpen.cli.common import check_outputs, console, force_option
 from realpen.errors import fail
 
-hatt_app = typer.Typer(
-    help="HaTT texture models (Models_<texture>.xml): the (speed, force) grid, and stylus "
-         "vibration synthesised from it.",
-    no_args_is_help=True,
-    context_settings=CONTEXT_SETTINGS,
-)
-app.add_typer(hatt_app, name="hatt")
+hatt_app = sub_app("hatt", "HaTT texture models (Models_<texture>.xml): the (speed, force) grid, "
+                           "and stylus vibration synthesised from it.")
 
 MODEL_HELP = "A HaTT model file, e.g. 'Models_Book.xml'."
 SUFFIXES = (".wav", ".npz")

@@ -10,13 +10,12 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import CONTEXT_SETTINGS, app
+from realpen.cli import sub_app
 from realpen.cli.common import PROGRESS_AFTER_S, check_outputs, console, force_option, progress_bar
+from realpen.cli.sound_cmds import CROSSFADE_MS, UNIT_MS
 from realpen.errors import RealPenError
 
-profile_app = typer.Typer(help="Pen profiles: build, list and show.", no_args_is_help=True,
-                          context_settings=CONTEXT_SETTINGS)
-app.add_typer(profile_app, name="profile")
+profile_app = sub_app("profile", "Pen profiles: build, list and show.")
 
 
 @profile_app.command("build")
@@ -47,8 +46,8 @@ def build(
                                             help="Rate in Hz of a vibration CSV without time."),
     analysis_rate: float | None = typer.Option(None, "--analysis-rate",
                                                help="Resample the vibration to this rate first."),
-    sound_unit_ms: float = typer.Option(300.0, "--sound-unit-ms", help="Sound loop unit in ms."),
-    sound_crossfade_ms: float = typer.Option(10.0, "--sound-crossfade-ms",
+    sound_unit_ms: float = typer.Option(UNIT_MS, "--sound-unit-ms", help="Sound loop unit in ms."),
+    sound_crossfade_ms: float = typer.Option(CROSSFADE_MS, "--sound-crossfade-ms",
                                              help="Crossfade at the sound loop's wrap in ms."),
     coupling: Path | None = typer.Option(None, "--coupling",
                                          help="Coupling JSON (Eq. 1); default constants if absent."),

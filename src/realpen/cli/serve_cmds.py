@@ -8,16 +8,14 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import CONTEXT_SETTINGS, app
+from realpen.cli import app, sub_app
 from realpen.cli.common import check_outputs, console, force_option
 from realpen.errors import RealPenError, require_choice
 from realpen.io.paths import default_store
 
 TACTILE_CHOICES = ("audio", "none")
 
-strokes_app = typer.Typer(help="The strokes the live app stored.", no_args_is_help=True,
-                          context_settings=CONTEXT_SETTINGS)
-app.add_typer(strokes_app, name="strokes")
+strokes_app = sub_app("strokes", "The strokes the live app stored.")
 
 
 def _is_loopback(host: str) -> bool:

@@ -10,17 +10,12 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import CONTEXT_SETTINGS, app
+from realpen.cli import sub_app
 from realpen.cli.common import check_outputs, console, force_option, progress_bar
 from realpen.errors import RealPenError
 
-sound_app = typer.Typer(
-    help="Friction sound: seamless loop units, the pressure/speed coupling (Eq. 1), and what a "
-         "stroke sounds like.",
-    no_args_is_help=True,
-    context_settings=CONTEXT_SETTINGS,
-)
-app.add_typer(sound_app, name="sound")
+sound_app = sub_app("sound", "Friction sound: seamless loop units, the pressure/speed coupling "
+                             "(Eq. 1), and what a stroke sounds like.")
 
 # Defaults and limits of realpen.sound.loop and realpen.sound.granular (UNIT_MS, CROSSFADE_MS,
 # DEFAULT_RATE, MIN_RATE, MAX_RATE, REFERENCE_DBFS, GRAIN_MS, LENGTH_MS, MAX_LENGTH_MS), written

@@ -37,7 +37,7 @@ from realpen.exports.base import Export
 from realpen.io.files import atomic_path
 
 __all__ = ["FORMATS", "Export", "Written", "format_names", "profile_inputs", "companion_paths",
-           "render", "export", "render_profile", "export_profile"]
+           "render", "export", "export_profile"]
 
 FORMATS: dict[str, ModuleType] = {
     "wav": wav,
@@ -181,11 +181,6 @@ def export(fmt: str, out_path: str | os.PathLike, pattern, sound=None, coupling=
     except OSError as error:
         raise fail(out, f"cannot write ({error.strerror or error})") from None
     return Written(out, companions, result)
-
-
-def render_profile(profile, fmt: str, **options) -> Export:
-    """:func:`render` a pen profile (its pattern, sound loop, coupling, name and version)."""
-    return render(fmt, profile, **options)
 
 
 def export_profile(profile, fmt: str, out_path: str | os.PathLike, **options) -> Written:

@@ -38,9 +38,10 @@ import math
 
 import numpy as np
 
+from realpen import __version__
 from realpen.errors import ParameterError
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_pattern, check_repeats, realpen_version, sound_samples
+from realpen.exports.base import Export, check_pattern, check_repeats, sound_samples
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["SUFFIX", "MAX_CURVE_POINTS", "MAX_EVENT_S", "LIMITS", "build", "sound_wav", "export"]
@@ -140,7 +141,7 @@ def build(pattern: TactilePattern, sound=None, *, repeats: int = 1,
                      "Created": created or _dt.date.today().isoformat(),
                      "Description": f"{what}{total * 1000:g} ms "
                                     f"({repeats} × {measured.period_s * 1000:g} ms), RealPen "
-                                    f"{realpen_version()}, version {version or pattern.version}"},
+                                    f"{__version__}, version {version or pattern.version}"},
         "Pattern": entries,
     }
 

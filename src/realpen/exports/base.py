@@ -12,7 +12,7 @@ from realpen.tactile.pattern import TactilePattern
 from realpen.tactile.synthesis import MAX_RATE
 
 __all__ = ["Export", "MAX_REPEATS", "check_repeats", "check_pattern", "sound_samples",
-           "resample_loop", "realpen_version", "title"]
+           "resample_loop", "title"]
 
 MAX_REPEATS = 100  # 150 s of a 1.5 s pattern; players loop, files need not
 
@@ -37,13 +37,6 @@ class Export:
     def __repr__(self) -> str:
         extra = f", companions {sorted(self.companions)}" if self.companions else ""
         return f"Export({len(self.data)} bytes{extra}: {self.summary[:120]})"
-
-
-def realpen_version() -> str:
-    """The package version, for the files' metadata."""
-    from realpen import __version__
-
-    return __version__
 
 
 def title(name: str, tool: str = "") -> str:

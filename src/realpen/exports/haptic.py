@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import json
 
+from realpen import __version__
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_pattern, check_repeats, realpen_version
+from realpen.exports.base import Export, check_pattern, check_repeats
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["SUFFIX", "LIMITS", "build", "export"]
@@ -54,7 +55,7 @@ def build(pattern: TactilePattern, *, repeats: int = 1, name: str = "pattern", t
     return {
         "version": {"major": 1, "minor": 0, "patch": 0},
         "metadata": {
-            "editor": f"RealPen {realpen_version()}",
+            "editor": f"RealPen {__version__}",
             "author": "",
             "source": f"{name} (version {version or pattern.version})",
             "project": "RealPen",

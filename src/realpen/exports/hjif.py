@@ -52,7 +52,8 @@ import json
 
 import numpy as np
 
-from realpen.exports.base import Export, check_pattern, check_repeats, realpen_version, title
+from realpen import __version__
+from realpen.exports.base import Export, check_pattern, check_repeats, title
 from realpen.tactile.pattern import Component, TactilePattern
 from realpen.tactile.synthesis import fade_samples, subpattern_samples
 
@@ -170,7 +171,7 @@ def build(pattern: TactilePattern, *, repeats: int = 1, date: str | None = None,
                   "effect_library": [], "channels": [channel]}
     return {"version": "2023", "profile": "Main", "level": 1,
             "date": date or _dt.date.today().isoformat(),
-            "description": f"RealPen {realpen_version()}: {name}, {repeats} period(s) of the "
+            "description": f"RealPen {__version__}: {name}, {repeats} period(s) of the "
                            f"tactile pattern, version {version or pattern.version}",
             "timescale": timescale, "avatars": [], "perceptions": [perception], "syncs": []}
 

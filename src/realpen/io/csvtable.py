@@ -28,8 +28,7 @@ import numpy as np
 from realpen.errors import ParameterError, fail
 from realpen.io.files import check_readable_file
 
-__all__ = ["Table", "read_csv", "read_table", "read_columns", "is_number", "DELIMITERS",
-           "SNIFF_ROWS"]
+__all__ = ["Table", "read_csv", "is_number", "DELIMITERS", "SNIFF_ROWS"]
 
 DELIMITERS = ",;\t "
 SNIFF_ROWS = 20
@@ -83,7 +82,7 @@ class Table:
 
 def read_csv(path: str | os.PathLike, columns: Sequence[str | int] | None = None, *,
              header: bool | None = True, min_rows: int = 1,
-             row_hint: str | None = None) -> Table:
+             row_hint: str | None = None, optional: Sequence[str] = ()) -> Table:
     """Read numeric columns of a CSV file; see the module doc for what is accepted.
 
     Args:
@@ -96,6 +95,8 @@ def read_csv(path: str | os.PathLike, columns: Sequence[str | int] | None = None
         min_rows: fewest data rows accepted (≥ 0).
         row_hint: what a row must hold, added to messages about a bad row (e.g. ``"every row
             needs two numbers: frequency in Hz, response"``).
+        optional: names of columns read after ``columns`` when the header has them (e.g. a
+            trajectory's tilt); ignored when ``columns`` is None or the file has no header.
 
     Returns:
         The :class:`Table`.
@@ -142,6 +143,10 @@ def read_csv(path: str | os.PathLike, columns: Sequence[str | int] | None = None
     width = len(names_in_file) if names_in_file is not None else len(data[0][1]) if data else 0
     shown = names_in_file or tuple(f"column {index + 1}" for index in range(width))
     indices = _indices(path, columns, names_in_file, width, first_line, hint)
+    if optional and columns is not None and names_in_file is not None:
+        folded = [name.strip().lower() for name in names_in_file]
+        indices += [folded.index(name.strip().lower()) for name in optional
+                    if name.strip().lower() in folded]
     if len(data) < min_rows:
         raise fail(path, f"CSV needs at least {min_rows} data row(s), has {len(data)}"
                          + (hint if header is False else ""))
@@ -160,25 +165,6 @@ def read_csv(path: str | os.PathLike, columns: Sequence[str | int] | None = None
     return Table(names=tuple(shown[index] for index in indices), values=values,
                  lines=np.array([number for number, _ in data], dtype=np.int64),
                  header=names_in_file, delimiter=delimiter, decimal_comma=comma, source=path)
-
-
-def read_table(path: str | os.PathLike, required: Sequence[str], min_rows: int = 1) -> Table:
-    """Read the ``required`` columns of a CSV file with a header row.
-
-    The same as ``read_csv(path, required, min_rows=min_rows)``; column names are matched
-    case-insensitively, other columns are allowed and ignored, and ``Table.columns`` holds one
-    array per required name in lower case.
-    """
-    return read_csv(path, required, min_rows=min_rows)
-
-
-def read_columns(path: str | os.PathLike, required: Sequence[str],
-                 min_rows: int = 1) -> dict[str, np.ndarray]:
-    """Read the ``required`` columns of a CSV file with a header row, by lower-case name.
-
-    The same as :func:`read_table` without the line numbers.
-    """
-    return read_table(path, required, min_rows).columns
 
 
 def is_number(text: str, decimal_comma: bool = False) -> bool:

@@ -26,6 +26,7 @@ import struct
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -33,7 +34,7 @@ from realpen.errors import ParameterError, fail
 
 __all__ = ["atomic_path", "json_text", "check_readable_file", "current_umask", "write_files",
            "write_json", "wav_bytes", "write_wav", "sha256_of", "add_smpl_loop",
-           "read_smpl_loop", "SMPL_UNITY_NOTE"]
+           "read_smpl_loop", "riff_chunks", "SMPL_UNITY_NOTE"]
 
 SMPL_UNITY_NOTE = 60  # MIDI note at which the sample plays at its own rate (middle C)
 _SMPL_HEADER = struct.Struct("<9I")   # manufacturer … sampler data size: 36 bytes
@@ -157,15 +158,32 @@ def write_wav(target: str | os.PathLike, samples: np.ndarray, rate: int,
         tmp.write_bytes(data)
 
 
-def _chunks(data: bytes, source: object) -> Iterator[tuple[bytes, int, int]]:
-    """(name, offset of the chunk's body, body length) of each chunk of RIFF/WAVE bytes."""
-    if len(data) < 12 or data[:4] != b"RIFF" or data[8:12] != b"WAVE":
-        raise fail(source, "not a RIFF/WAVE file")
+def riff_chunks(handle: BinaryIO) -> Iterator[tuple[bytes, int, int]]:
+    """(name, offset of the chunk's body, body length) of each chunk of a RIFF/WAVE file.
+
+    Only the chunk headers are read. ``handle`` is a binary file (or :class:`io.BytesIO`) at
+    its start; the caller may read a chunk's body before asking for the next chunk. A file that
+    is not RIFF/WAVE has no chunks.
+    """
+    head = handle.read(12)
+    if len(head) < 12 or head[:4] != b"RIFF" or head[8:12] != b"WAVE":
+        return
     position = 12
-    while position + 8 <= len(data):
-        name, length = struct.unpack_from("<4sI", data, position)
+    while True:
+        handle.seek(position)
+        chunk = handle.read(8)
+        if len(chunk) < 8:
+            return
+        name, length = struct.unpack("<4sI", chunk)
         yield name, position + 8, length
         position += 8 + length + (length & 1)
+
+
+def _chunks(data: bytes, source: object) -> list[tuple[bytes, int, int]]:
+    """:func:`riff_chunks` of RIFF/WAVE bytes; :class:`RealPenError` for other bytes."""
+    if len(data) < 12 or data[:4] != b"RIFF" or data[8:12] != b"WAVE":
+        raise fail(source, "not a RIFF/WAVE file")
+    return list(riff_chunks(io.BytesIO(data)))
 
 
 def add_smpl_loop(wav: bytes, start: int = 0, end: int | None = None) -> bytes:
@@ -237,16 +255,9 @@ def read_smpl_loop(source: str | os.PathLike | bytes) -> tuple[int, int] | None:
         raise fail(source, f"cannot read ({error.strerror or error})") from None
 
 
-def _first_smpl_loop(handle) -> tuple[int, int] | None:
-    head = handle.read(12)
-    if len(head) < 12 or head[:4] != b"RIFF" or head[8:12] != b"WAVE":
-        return None
+def _first_smpl_loop(handle: BinaryIO) -> tuple[int, int] | None:
     wanted = _SMPL_HEADER.size + _SMPL_LOOP.size
-    while True:
-        chunk = handle.read(8)
-        if len(chunk) < 8:
-            return None
-        name, length = struct.unpack("<4sI", chunk)
+    for name, _, length in riff_chunks(handle):
         if name == b"smpl" and length >= wanted:
             body = handle.read(wanted)
             if len(body) < wanted:
@@ -255,7 +266,7 @@ def _first_smpl_loop(handle) -> tuple[int, int] | None:
                 return None
             _, _, start, end, _, _ = _SMPL_LOOP.unpack_from(body, _SMPL_HEADER.size)
             return (int(start), int(end)) if end >= start else None
-        handle.seek(length + (length & 1), os.SEEK_CUR)
+    return None
 
 
 def sha256_of(path: str | os.PathLike) -> str:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import re
-import struct
 import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -20,11 +19,10 @@ from scipy.interpolate import CubicSpline
 
 from realpen.errors import ParameterError, fail, require_number
 from realpen.io.csvtable import read_csv
-from realpen.io.files import atomic_path, check_readable_file, sha256_of
+from realpen.io.files import atomic_path, check_readable_file, riff_chunks, sha256_of
 
-__all__ = ["Recording", "load_recording", "save_npz", "AXIS_CHOICES"]
+__all__ = ["Recording", "load_recording", "as_recording", "save_npz", "AXIS_CHOICES"]
 
-TIME_COLUMNS = ("t", "time", "timestamp")
 AXIS_CHOICES = ("dft321", "x", "y", "z", "magnitude")
 
 
@@ -89,6 +87,57 @@ def _check_finite(samples: np.ndarray, source: str) -> None:
         raise fail(source, f"contains NaN or infinite values (first at frame {first})")
 
 
+def _axis_names(count: int) -> tuple[str, ...]:
+    """Default names of ``count`` columns: x, y, z for up to three, else ch0, ch1, ..."""
+    return ("x", "y", "z")[:count] if count <= 3 else tuple(f"ch{i}" for i in range(count))
+
+
+def as_recording(data, rate: float | None = None, *, rate_parameter: str = "rate",
+                 data_parameter: str = "data") -> Recording:
+    """A :class:`Recording` from a Recording (as it is), a file path, or an array of samples.
+
+    Args:
+        data: a Recording; a path to a WAV/FLAC/OGG, CSV or NPZ file (see
+            :func:`load_recording`); or an array of shape (frames,) or (frames, axes).
+        rate: sampling rate in Hz: required with an array, refused with a Recording, and with
+            a path only for files that carry no rate.
+        rate_parameter, data_parameter: how the caller names ``rate`` and ``data`` in messages.
+
+    Raises:
+        ParameterError: a missing or superfluous rate, an array that is not (frames, axes) of
+            finite numbers, or a ``data`` of another type.
+
+    >>> as_recording([0.0, 1.0, 0.0, -1.0], rate=1344)
+    Recording(x, 4 frames at 1344 Hz (0.003 s), arbitrary, from array)
+    """
+    if isinstance(data, Recording):
+        if rate is not None and rate != data.rate:
+            raise ParameterError(rate_parameter, f"a Recording carries its own rate "
+                                                 f"({data.rate:g} Hz); give it only with an array")
+        return data
+    if isinstance(data, (str, os.PathLike)):
+        return load_recording(data, rate=rate)
+    if rate is None:
+        raise ParameterError(rate_parameter, "needed in Hz when the data is an array")
+    require_number(rate_parameter, rate, minimum=0.0, inclusive=False)
+    try:
+        samples = np.asarray(data, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError(data_parameter, f"must be a Recording, a path or an array of "
+                                             f"numbers, not {type(data).__name__}") from None
+    if samples.ndim == 1:
+        samples = samples[:, None]
+    if samples.ndim != 2 or samples.shape[0] == 0:
+        raise ParameterError(data_parameter, f"must have shape (frames,) or (frames, axes), "
+                                             f"got {samples.shape}")
+    if samples.shape[1] > samples.shape[0]:
+        raise ParameterError(data_parameter, f"shape {samples.shape} has more axes than "
+                                             f"frames; pass (frames, axes), e.g. data.T")
+    if not np.all(np.isfinite(samples)):
+        raise ParameterError(data_parameter, "contains NaN or infinite values")
+    return Recording(samples, float(rate), _axis_names(samples.shape[1]), source="array")
+
+
 def load_recording(path: str | os.PathLike, rate: float | None = None,
                    units: str | None = None) -> Recording:
     """Load a vibration recording from WAV/FLAC/OGG, CSV or NPZ.
@@ -143,7 +192,7 @@ def _load_audio(path: Path) -> Recording:
     if missing:
         raise fail(path, f"truncated: the WAV data chunk is {missing} bytes shorter than its header says")
     channels = data.shape[1]
-    axes = ("x", "y", "z")[:channels] if channels <= 3 else tuple(f"ch{i}" for i in range(channels))
+    axes = _axis_names(channels)
     return Recording(data, float(rate), axes, units="full scale")
 
 
@@ -153,20 +202,12 @@ def _wav_missing_bytes(path: Path) -> int:
     libsndfile quietly reads what is there, so a cut-off WAV must be caught from its header.
     """
     with open(path, "rb") as handle:
-        head = handle.read(12)
-        if len(head) < 12 or head[:4] != b"RIFF" or head[8:12] != b"WAVE":
-            return 0
-        size = path.stat().st_size
-        while True:
-            chunk = handle.read(8)
-            if len(chunk) < 8:
-                return 0
-            name, length = struct.unpack("<4sI", chunk)
+        for name, offset, length in riff_chunks(handle):
             if name == b"data":
                 if length in (0, 0xFFFFFFFF):  # streamed WAVs leave the size unset
                     return 0
-                return max(0, length - (size - handle.tell()))
-            handle.seek(length + (length & 1), os.SEEK_CUR)
+                return max(0, length - (path.stat().st_size - offset))
+    return 0
 
 
 TIME_PATTERN = re.compile(r"^(t|time|timestamp)([^a-z0-9].*)?$", re.IGNORECASE)
@@ -250,8 +291,7 @@ def _load_npz(path: Path, rate: float | None) -> Recording:
             raise fail(path, "'axes' must be an array of axis names")
         axes = tuple(str(a) for a in names)
     else:
-        axes = ("x", "y", "z")[:samples.shape[1]] if samples.shape[1] <= 3 else tuple(
-            f"ch{i}" for i in range(samples.shape[1]))
+        axes = _axis_names(samples.shape[1])
     if len(axes) != samples.shape[1]:
         raise fail(path, f"NPZ names {len(axes)} axes for {samples.shape[1]} columns")
     units = str(contents["units"]) if "units" in contents else "arbitrary"

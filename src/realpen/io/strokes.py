@@ -26,7 +26,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["StrokeSample", "SAMPLE_FIELDS", "SAMPLE_UNITS", "TRAJECTORY_FIELDS",
+__all__ = ["StrokeSample", "SAMPLE_FIELDS", "TRAJECTORY_FIELDS",
            "PRESSURE_RANGE", "TILT_RANGE_DEG", "POSITION_RANGE_MM", "TIME_RANGE_S",
            "SPEED_RANGE_MM_S", "Time", "Millimetres"]
 
@@ -81,10 +81,6 @@ class StrokeSample(BaseModel):
 
 SAMPLE_FIELDS: tuple[str, ...] = tuple(StrokeSample.model_fields)
 """The fields of a stroke sample, in order: the stroke store's sample columns."""
-
-SAMPLE_UNITS: dict[str, str] = {"t": "s", "x": "mm", "y": "mm", "pressure": "0-1",
-                                "tilt_x": "degrees", "tilt_y": "degrees", "speed": "mm/s"}
-"""The unit of each field of :data:`SAMPLE_FIELDS`."""
 
 TRAJECTORY_FIELDS: tuple[str, ...] = SAMPLE_FIELDS[:4]
 """The columns a trajectory CSV must have (``t, x, y, pressure``); speed is computed from them."""

@@ -14,5 +14,6 @@ events. The pieces:
 May import: any library layer below it (:mod:`realpen.io`, :mod:`realpen.profile`,
 :mod:`realpen.exports`, :mod:`realpen.pens`, ...), never :mod:`realpen.cli`. Routes and
 lifecycle only: what a message does to a pen or a sound is computed in the library.
-:mod:`~realpen.live.messages` imports pydantic and :mod:`realpen.io.strokes` only.
+:mod:`~realpen.live.messages` imports pydantic, :mod:`realpen.io.strokes` and
+:mod:`realpen.profile.schema` only (neither scipy nor soundfile).
 """

@@ -24,8 +24,8 @@ normalised 0–1 (a mouse reports the constant 0.5); ``tilt_x``, ``tilt_y`` in d
 one stroke-sample definition, :class:`realpen.io.strokes.StrokeSample` (:class:`Sample` is that
 class), which the stroke store and stroke rendering use as well.
 
-This module imports pydantic and :mod:`realpen.io.strokes` only: loading the WebSocket schema
-loads neither scipy nor soundfile.
+This module imports pydantic, :mod:`realpen.io.strokes` and the profile schema's name rule
+only: loading the WebSocket schema loads neither scipy nor soundfile.
 """
 
 from __future__ import annotations
@@ -36,11 +36,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
 from realpen.io.strokes import StrokeSample, Time
-
-try:  # the profile schema is pydantic-only, so the name rule can come from its one home
-    from realpen.profile.schema import NAME_PATTERN
-except ImportError:  # pragma: no cover - until realpen.profile.schema exists
-    NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+from realpen.profile.schema import NAME_PATTERN  # pydantic-only: the name rule's one home
 
 __all__ = ["PROTOCOL", "MAX_MESSAGE_BYTES", "MAX_SAMPLES", "MODALITIES", "NAME_PATTERN",
            "Sample", "Hello", "PenDown", "Samples", "Gain", "PenUp", "ClientMessage",

@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from realpen import __version__
 from realpen.errors import ParameterError
-from realpen.io.files import wav_bytes
 from realpen.io.recording import Recording
-from realpen.profile.bundle import PenProfile
+from realpen.profile.bundle import PenProfile, bundle_wavs
 from realpen.profile.schema import (
     NAME_PATTERN,
     SOUND_WAV,
@@ -88,26 +88,17 @@ def profile_from_parts(name: str, tool: str, pattern: TactilePattern, sound: np.
     params = pattern.params.to_json() if pattern.params is not None else {}
     meta = ProfileMeta(
         name=name, tool=tool, description=description,
-        tactile=TactilePattern(pattern.subpatterns, pattern.rate, pattern.subpattern_ms,
-                               pattern.boundary, pattern.crossfade_ms),
+        tactile=pattern,  # validation keeps the pattern's own fields (to_json), not its origin
         sound=SoundSection(rate=sound_rate, frames=len(sound), **sound_section),
         actuator=pattern.actuator,
         coupling=coupling,
         files=files,
-        provenance=Provenance(realpen_version=_realpen_version(), sources=sources,
+        provenance=Provenance(realpen_version=__version__, sources=sources,
                               tactile_parameters=params, sound_parameters=sound_parameters,
                               model=model, notes=list(pattern.notes)))
     profile = PenProfile(meta, tactile, sound)
-    wavs = {TACTILE_WAV: wav_bytes(tactile, pattern.rate, loop=True),
-            SOUND_WAV: wav_bytes(sound, sound_rate, loop=True)}
-    profile.meta = profile._current_meta(wavs)
+    profile.meta = profile._current_meta(bundle_wavs(profile))
     return profile
-
-
-def _realpen_version() -> str:
-    from realpen import __version__
-
-    return __version__
 
 
 def build_profile(name: str, tool: str, vibration: Recording, sound: Recording | SoundLoop,

@@ -22,7 +22,7 @@ import os
 import shutil
 import tempfile
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -92,9 +92,8 @@ class PenProfile:
             params = TactileParams(**self.meta.provenance.tactile_parameters)
         except (TypeError, ParameterError):
             params = None
-        pattern = TactilePattern(base.subpatterns, base.rate, base.subpattern_ms, base.boundary,
-                                 base.crossfade_ms, self.meta.actuator, params,
-                                 notes=tuple(self.meta.provenance.notes))
+        pattern = replace(base, actuator=self.meta.actuator, params=params,
+                          notes=tuple(self.meta.provenance.notes))
         return pattern.with_samples(self.tactile)
 
     @property
@@ -119,10 +118,6 @@ class PenProfile:
         ``profile.json`` (see :func:`realpen.profile.schema.profile_version`); the same pen
         has the same version on every machine."""
         return profile_version(self.meta)
-
-    def json_bytes(self) -> bytes:
-        """``profile.json`` exactly as :func:`save_profile` writes it."""
-        return _document_bytes(self._current_meta(bundle_wavs(self)))
 
     def summary(self) -> str:
         """One line: name, tool, components, lengths, actuator."""

@@ -104,14 +104,7 @@ TactileModel = model_of(TactilePattern, "TactileModel", {
 
 
 def _pattern(model: BaseModel) -> TactilePattern:
-    return TactilePattern(**{name: getattr(model, name) for name in TactileModel.model_fields
-                             if name != "subpatterns"},
-                          subpatterns=[[Component(**c.model_dump()) for c in sub]
-                                       for sub in model.subpatterns])
-
-
-def _serialise_pattern(pattern: TactilePattern) -> dict:
-    return pattern.to_json()
+    return TactilePattern.from_json(model.model_dump())
 
 
 def _pattern_json(value: Any) -> Any:
@@ -119,14 +112,10 @@ def _pattern_json(value: Any) -> Any:
 
 
 TactileField = Annotated[TactileModel, BeforeValidator(_pattern_json), AfterValidator(_pattern),
-                         PlainSerializer(_serialise_pattern)]
+                         PlainSerializer(TactilePattern.to_json)]
 
 
-def _actuator(value: Any) -> Actuator:
-    return Actuator.from_json(value)
-
-
-ActuatorField = Annotated[Any, PlainValidator(_actuator), PlainSerializer(Actuator.to_json),
+ActuatorField = Annotated[Any, PlainValidator(Actuator.from_json), PlainSerializer(Actuator.to_json),
                           WithJsonSchema({
                               "type": "object", "required": ["spec", "kind"],
                               "properties": {"spec": {"type": "string"},

@@ -26,12 +26,14 @@ from scipy.ndimage import uniform_filter1d
 from realpen.errors import ParameterError, fail
 from realpen.io.recording import Recording
 from realpen.sound.loop import (
+    DEFAULT_RATE,
     EDGE_MS,
     HOP_MS,
     REFERENCE_DBFS,
     SILENCE_DB,
     SoundLoop,
     _mono,
+    _own_rate,
     check_level,
     check_ms,
     check_rate,
@@ -201,8 +203,8 @@ def granular(x: np.ndarray, rate: float, frames: int, part: SteadyPart,
 def granular_loop(sound: Recording | np.ndarray | SoundLoop | str | os.PathLike,
                   rate: float | None = None, *, length_ms: float = LENGTH_MS,
                   grain_ms: float = GRAIN_MS, seed: int = 0,
-                  level_dbfs: float = REFERENCE_DBFS, source: object | None = None,
-                  recording: Recording | None = None) -> SoundLoop:
+                  level_dbfs: float = REFERENCE_DBFS, source: object | None = None
+                  ) -> SoundLoop:
     """A granular texture of ``length_ms`` (rounded to half grains) that loops without a seam.
 
     The texture is scaled so the steady material has an RMS of ``level_dbfs`` dB re full scale
@@ -221,8 +223,6 @@ def granular_loop(sound: Recording | np.ndarray | SoundLoop | str | os.PathLike,
         seed: seed of the random grain offsets (≥ 0).
         level_dbfs: RMS of the steady material in dBFS, finite and at most 0.
         source: names the recording in error messages (default: the recording's file).
-        recording: the loaded recording, for provenance in the JSON, when ``sound`` is an
-            array.
 
     Returns:
         The :class:`~realpen.sound.loop.SoundLoop` (``mode="granular"``).
@@ -239,18 +239,14 @@ def granular_loop(sound: Recording | np.ndarray | SoundLoop | str | os.PathLike,
         ('granular', 48000, -20)
     """
     if isinstance(sound, (str, os.PathLike)):
-        sound = load_sound(sound, 48000 if rate is None else rate)
+        sound = load_sound(sound, DEFAULT_RATE if rate is None else rate)
         rate = None
     if isinstance(sound, SoundLoop):
-        if rate is not None and abs(rate - sound.rate) > 1e-9:
-            raise ParameterError("rate", f"a sound loop is at its own rate ({sound.rate:g} Hz), "
-                                         f"got {rate:g}")
-        x, rate = sound.samples, check_rate(sound.rate)
+        x, rate = sound.samples, _own_rate(sound, rate)
         name = source or sound.source or "loop"
         provenance = (sound.source, sound.source_sha256, sound.history)
     else:
-        x, rate, loaded, name = _mono(sound, rate, source)
-        recording = recording or loaded
+        x, rate, recording, name = _mono(sound, rate, source)
         provenance = ((recording.source, recording.sha256, recording.history) if recording
                       else (None, None, ()))
     check_ms("grain_ms", grain_ms)

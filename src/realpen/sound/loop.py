@@ -800,6 +800,14 @@ def _mono(sound, rate: float | None, source: object | None
     return x, check_rate(rate), None, "signal" if source is None else source
 
 
+def _own_rate(loop: SoundLoop, rate: float | None) -> float:
+    """The rate of a sound loop, which plays at its own rate: ``rate``, if given, must be it."""
+    if rate is not None and abs(float(rate) - loop.rate) > 1e-9:
+        raise ParameterError("rate", f"a sound loop plays at its own rate ({loop.rate:g} Hz), "
+                                     f"got {rate:g}")
+    return check_rate(loop.rate)
+
+
 def find_loop_unit(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
                    crossfade_ms: float = CROSSFADE_MS, hop_ms: float = HOP_MS,
                    compensate: bool = True, source: object = "signal",

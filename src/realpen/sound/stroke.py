@@ -60,6 +60,7 @@ from realpen.sound.loop import (
     ProgressCallback,
     SoundLoop,
     _mono,
+    _own_rate,
     check_level,
     check_ms,
     check_rate,
@@ -235,11 +236,7 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
     Raises:
         RealPenError: any problem with the file (see :meth:`Trajectory.checked`).
     """
-    table = read_csv(path, TRAJECTORY_FIELDS, min_rows=2)
-    header = {name.strip().lower() for name in table.header or ()}
-    tilts = [name for name in TILT_FIELDS if name in header]
-    if tilts:
-        table = read_csv(path, TRAJECTORY_FIELDS + tuple(tilts), min_rows=2)
+    table = read_csv(path, TRAJECTORY_FIELDS, min_rows=2, optional=TILT_FIELDS)
     columns = table.columns
     return Trajectory.checked(columns["t"], columns["x"], columns["y"], columns["pressure"], path,
                               lines=table.lines, tilt_x=columns.get("tilt_x"),
@@ -349,10 +346,7 @@ def render_stroke(sound: np.ndarray | Recording | SoundLoop, rate: float | None,
     check_level(level_dbfs)
     ready = None
     if isinstance(sound, SoundLoop):
-        if rate is not None and abs(float(rate) - sound.rate) > 1e-9:
-            raise ParameterError("rate", f"a sound loop plays at its own rate "
-                                         f"({sound.rate:g} Hz), got {rate:g}")
-        rate = check_rate(sound.rate)
+        rate = _own_rate(sound, rate)
         source = source if source is not None else sound.source or "sound loop"
         ready = sound
         sound = sound.samples

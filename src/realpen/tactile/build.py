@@ -22,15 +22,13 @@ total level and the fluctuation lies in its frequency content.
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from realpen.dsp.filters import prepare
 from realpen.dsp.spectrum import ProgressCallback, analyze, principal_frequencies
 from realpen.dsp.tracks import continuous_phases, joins, link_components
 from realpen.errors import ParameterError, RealPenError, fail
-from realpen.io.recording import Recording
+from realpen.io.recording import Recording, as_recording
 from realpen.tactile.actuator import Actuator, as_actuator, weighting
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.pattern import Component, TactilePattern
@@ -39,28 +37,6 @@ from realpen.tactile.synthesis import synthesize
 __all__ = ["build_pattern", "tactile_pattern", "DEFAULT_ACTUATOR"]
 
 DEFAULT_ACTUATOR = "lra:f0=175,q=8"
-
-
-def _as_recording(recording, input_rate: float | None) -> Recording:
-    if isinstance(recording, Recording):
-        if input_rate is not None:
-            raise ParameterError("input_rate", "is only for an array; a Recording has its rate")
-        return recording
-    if isinstance(recording, (str, os.PathLike)):
-        from realpen.io.recording import load_recording
-
-        if input_rate is not None:
-            return load_recording(recording, rate=input_rate)
-        return load_recording(recording)
-    if isinstance(recording, np.ndarray):
-        if input_rate is None:
-            raise ParameterError("input_rate", "give the rate in Hz of an array recording")
-        samples = recording if recording.ndim == 2 else recording.reshape(len(recording), -1)
-        axes = ("z",) if samples.shape[1] == 1 else tuple("xyz"[:samples.shape[1]]) \
-            if samples.shape[1] <= 3 else tuple(f"a{i}" for i in range(samples.shape[1]))
-        return Recording(samples, float(input_rate), axes, source="array")
-    raise ParameterError("recording", f"must be a Recording, a path or an array, got "
-                                      f"{type(recording).__name__}")
 
 
 def _subpattern_peaks(mono: np.ndarray, rate: float, analysis, params: TactileParams,
@@ -127,7 +103,8 @@ def build_pattern(recording: Recording, actuator: Actuator | str = DEFAULT_ACTUA
     elif options:
         params = params.updated(**options)
     actuator = as_actuator(actuator)
-    recording = _as_recording(recording, input_rate)
+    recording = as_recording(recording, input_rate, rate_parameter="input_rate",
+                             data_parameter="recording")
     prepared = prepare(recording, params.axis, params.analysis_rate, params.highpass_hz)
     analysis = analyze(prepared.mono, prepared.rate, params.selection_unit_ms, params.top,
                        params.subpatterns * params.units_per_subpattern, params.selection,

@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 
 from realpen.errors import ParameterError, require_choice, require_number
-from realpen.tactile.synthesis import BOUNDARIES, MAX_RATE
+from realpen.tactile.synthesis import BOUNDARIES, check_rate
 
 __all__ = ["CONDITIONS", "SELECTION_UNIT_MS", "AMPLITUDE_MODES", "SELECTIONS", "TactileParams"]
 
@@ -134,10 +134,7 @@ class TactileParams:
             raise ParameterError("selection_unit_ms", f"unit_ms ({self.unit_ms:g}) must be a whole "
                                                       f"multiple of it, got "
                                                       f"{self.selection_unit_ms:g}")
-        require_number("rate", self.rate, minimum=0, inclusive=False, maximum=MAX_RATE)
-        if int(self.rate) != self.rate:
-            raise ParameterError("rate", f"must be a whole number of Hz, got {self.rate:g}")
-        object.__setattr__(self, "rate", int(self.rate))
+        object.__setattr__(self, "rate", check_rate(self.rate))
         require_choice("boundary", self.boundary, BOUNDARIES)
         require_choice("amplitude", self.amplitude, AMPLITUDE_MODES)
         require_choice("selection", self.selection, SELECTIONS)

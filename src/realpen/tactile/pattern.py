@@ -24,7 +24,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,7 +33,13 @@ import numpy as np
 from realpen.errors import ParameterError, require_choice, require_number
 from realpen.tactile.actuator import Actuator
 from realpen.tactile.conditions import TactileParams
-from realpen.tactile.synthesis import BOUNDARIES, MAX_RATE, subpattern_samples, synthesize
+from realpen.tactile.synthesis import (
+    BOUNDARIES,
+    MAX_RATE,
+    check_rate,
+    subpattern_samples,
+    synthesize,
+)
 
 if TYPE_CHECKING:
     from realpen.dsp.spectrum import Analysis
@@ -226,10 +232,7 @@ class TactilePattern:
                                                     f"component")
             subpatterns.append(tuple(Component.from_json(c) for c in sub))
         set_(self, "subpatterns", tuple(subpatterns))
-        require_number("rate", self.rate, minimum=0.0, inclusive=False, maximum=MAX_RATE)
-        if int(self.rate) != self.rate:
-            raise ParameterError("rate", f"must be a whole number of Hz, got {self.rate:g}")
-        set_(self, "rate", int(self.rate))
+        set_(self, "rate", check_rate(self.rate))
         set_(self, "subpattern_ms", _finite("subpattern_ms", self.subpattern_ms, 0.0, False))
         require_number("subpattern_ms", self.subpattern_ms, maximum=MAX_SUBPATTERN_MS)
         require_choice("boundary", self.boundary, BOUNDARIES)
@@ -356,9 +359,7 @@ class TactilePattern:
                                             f"{self.rate} Hz, got shape {samples.shape}")
         if not np.all(np.isfinite(samples)):
             raise ParameterError("samples", "contains NaN or infinite values")
-        copy = TactilePattern(self.subpatterns, self.rate, self.subpattern_ms, self.boundary,
-                              self.crossfade_ms, self.actuator, self.params, self.analysis,
-                              self.provenance, self.notes)
+        copy = replace(self)
         object.__setattr__(copy, "_samples", samples)
         return copy
 

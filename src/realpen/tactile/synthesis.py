@@ -24,10 +24,23 @@ import numpy as np
 
 from realpen.errors import ParameterError, require_choice, require_number
 
-__all__ = ["BOUNDARIES", "MAX_RATE", "synthesize", "subpattern_samples", "fade_samples", "component_arrays"]
+__all__ = ["BOUNDARIES", "MAX_RATE", "check_rate", "synthesize", "subpattern_samples", "fade_samples",
+           "component_arrays"]
 
 BOUNDARIES = ("crossfade", "hard")
 MAX_RATE = 384_000  # Hz; the highest common audio rate (a pattern is synthesised whole)
+
+
+def check_rate(rate: float) -> int:
+    """``rate`` as a whole number of Hz, above 0 and at most :data:`MAX_RATE`.
+
+    Raises:
+        ParameterError: (parameter ``rate``) otherwise.
+    """
+    require_number("rate", rate, minimum=0.0, inclusive=False, maximum=MAX_RATE)
+    if int(rate) != rate:
+        raise ParameterError("rate", f"must be a whole number of Hz, got {rate:g}")
+    return int(rate)
 
 
 def subpattern_samples(rate: float, subpattern_ms: float) -> int:
