@@ -89,8 +89,8 @@ class Page:
         self.page.on("pageerror", lambda error: self.problems.append(str(error)))
         self.page.on("console", lambda m: m.type == "error" and self.problems.append(m.text))
         self.page.goto(server.url + query)
-        self.page.wait_for_function("window.realpen && window.realpen.ready")
-        self.page.wait_for_function("window.realpen.link.state === 'open' && "
+        self.page.wait_for_function("() => window.realpen && window.realpen.ready")
+        self.page.wait_for_function("() => window.realpen.link.state === 'open' && "
                                     "window.realpen.link.session")
         self.cdp = self.context.new_cdp_session(self.page)
         self.box = self.page.locator("#ink").bounding_box()
@@ -126,7 +126,7 @@ class Page:
             self.settle()
 
     def settle(self) -> None:
-        self.page.wait_for_function("!window.realpen.down && "
+        self.page.wait_for_function("() => !window.realpen.down && "
                                     "window.realpen.link.acked === window.realpen.link.sent")
 
     def trace(self, stroke: int | None = None) -> list[dict]:
@@ -374,7 +374,7 @@ def test_calibration_sets_mm_and_speed(open_page, server):
     page.page.click("#calibrate")
     page.page.click("#cal-plus")
     page.page.click("#calibration button[value=save]")
-    page.page.wait_for_function("Math.abs(realpen.pxPerMm - 8.01) < 1e-9")
+    page.page.wait_for_function("() => Math.abs(realpen.pxPerMm - 8.01) < 1e-9")
     assert page.page.locator("#calibrate").inner_text() == "8.01 px/mm"
     assert page.eval("JSON.parse(localStorage.getItem('realpen.pxPerMm'))") == \
         pytest.approx(8.01)
@@ -386,7 +386,7 @@ def test_screenshot_on_a_tablet(open_page, viewport, name):
     page = open_page("?modality=auditory-tactile&ink=visible", viewport=viewport)
     for row, pen in enumerate(("pencil", "ballpoint", "marker")):
         page.page.click(f"#pens button[data-value={pen}]")
-        page.page.wait_for_function(f"realpen.pen === '{pen}'")
+        page.page.wait_for_function(f"() => realpen.pen === '{pen}'")
         page.stroke(loops(60, 90 + 110 * row, n=190 if viewport is LANDSCAPE else 130))
     overflow = page.eval("document.documentElement.scrollWidth - window.innerWidth")
     assert overflow <= 0
@@ -415,7 +415,7 @@ def test_lan_mode_page_works_with_its_token_only(browser, tmp_path):
             assert store_rows(lan, "SELECT sample_count FROM strokes WHERE session = ?",
                               session) == [(30,)]
             page.page.reload()  # the cookie alone keeps the page working
-            page.page.wait_for_function("window.realpen && window.realpen.ready && "
+            page.page.wait_for_function("() => window.realpen && window.realpen.ready && "
                                         "window.realpen.link.state === 'open'")
             assert page.eval("realpen.modality") == "tactile" and lan.token not in page.page.url
             assert page.problems == []
@@ -454,7 +454,7 @@ def test_a_pen_with_a_2_khz_tactile_pattern_loads_and_plays(browser, tmp_path):
 def test_picking_a_pen_whose_audio_fails_keeps_the_current_pen(open_page):
     page = open_page("?pen=pencil&modality=auditory", broken=["**/api/profiles/marker/*.wav"])
     page.page.click("#pens button[data-value=marker]")
-    page.page.wait_for_function("realpen.notice !== null")
+    page.page.wait_for_function("() => realpen.notice !== null")
     state = page.eval("({pen: realpen.pen, version: realpen.profileVersion, "
                       "playing: realpen.audio.playing, notice: realpen.notice, "
                       "saved: JSON.parse(localStorage.getItem('realpen.pen')), "
@@ -470,7 +470,7 @@ def test_picking_a_pen_whose_audio_fails_keeps_the_current_pen(open_page):
     page.pen("mouseReleased", 300, 220, 0.0, time.time())
     page.settle()
     page.page.click("#pens button[data-value=ballpoint]")  # a pen that loads: the notice goes
-    page.page.wait_for_function("realpen.pen === 'ballpoint' && realpen.notice === null")
+    page.page.wait_for_function("() => realpen.pen === 'ballpoint' && realpen.notice === null")
     assert page.eval("realpen.audio.playing") == "ballpoint"
     assert page.page.locator("#notice").is_hidden()
 
@@ -545,7 +545,7 @@ def test_audio_starts_from_the_first_event_that_gives_activation(gesture_browser
         calls = page.eval("window.__resumeCalls")
         assert calls[0] == {"event": "pointerdown:pen", "allowed": False}
         page.pen_at("mouseReleased", x, y, 0.0, time.time())
-        page.page.wait_for_function("realpen.audio.state === 'running'", timeout=5000)
+        page.page.wait_for_function("() => realpen.audio.state === 'running'", timeout=5000)
         calls = page.eval("window.__resumeCalls")
         # Off the writing surface nothing cancels the pen's pointerdown, so the compatibility
         # mousedown follows it, and that gives activation (the surface's strokes: next test).
@@ -553,7 +553,7 @@ def test_audio_starts_from_the_first_event_that_gives_activation(gesture_browser
         assert calls[:first + 1] == [{"event": "pointerdown:pen", "allowed": False},
                                      {"event": "mousedown:", "allowed": True}]
         page.page.wait_for_function(
-            "document.getElementById('st-audio').textContent.startsWith('audio ')")
+            "() => document.getElementById('st-audio').textContent.startsWith('audio ')")
         # Running: a stroke plays at once, and nothing asks again.
         page.stroke(writing(40), hold_s=0.1, lift=False)
         assert page.eval("realpen.gain") == pytest.approx(page.eval("realpen.targetGain"),
@@ -574,7 +574,7 @@ def test_a_pen_stroke_starts_audio_when_the_pen_lifts(gesture_browser, server):
         assert page.eval("window.__resumeCalls")[0] == {"event": "pointerdown:pen",
                                                         "allowed": False}
         page.pen("mouseReleased", 300, 220, 0.0, time.time())
-        page.page.wait_for_function("realpen.audio.state === 'running'", timeout=5000)
+        page.page.wait_for_function("() => realpen.audio.state === 'running'", timeout=5000)
         calls = page.eval("window.__resumeCalls")
         first = next(i for i, c in enumerate(calls) if c["allowed"])
         assert calls[:first + 1] == [{"event": "pointerdown:pen", "allowed": False},

@@ -1,6 +1,7 @@
 """The live app's FastAPI factory: thin routes over the catalog, the session, store and device.
 
-Routes (all behind :class:`~realpen.live.auth.AccessGuard`):
+Routes (all behind :class:`~realpen.live.auth.AccessGuard`, which refuses other sites' requests,
+and :class:`~realpen.live.auth.SecurityHeaders`, which adds the security headers):
 
 ``GET /``                                    the writing page
 ``GET /static/…``                            its ES modules and style sheet
@@ -8,7 +9,8 @@ Routes (all behind :class:`~realpen.live.auth.AccessGuard`):
 ``GET /api/profiles``                        the pens offered (name, version, coupling, …)
 ``GET /api/profiles/{name}/sound.wav``       a pen's sound unit (32-bit float WAV)
 ``GET /api/profiles/{name}/tactile.wav``     a pen's tactile pattern (32-bit float WAV)
-``GET /api/device/log?since=N``              the simulated device's command log
+``GET /api/device/log?since=N&limit=M``      the simulated device's command log, a page of at
+                                             most :data:`DEVICE_LOG_PAGE` entries at a time
 ``GET /api/status``                          pages connected, strokes and samples stored
 ``WS  /ws``                                  pen events (:mod:`realpen.live.messages`)
 """
@@ -27,7 +29,7 @@ from fastapi.staticfiles import StaticFiles
 
 from realpen import __version__
 from realpen.io.paths import default_store
-from realpen.live.auth import LOOPBACK_HOSTS, AccessGuard
+from realpen.live.auth import LOOPBACK_HOSTS, AccessGuard, SecurityHeaders
 from realpen.live.catalog import Catalog
 from realpen.live.device import PenDevice, SimulatedDevice
 from realpen.live.messages import MAX_MESSAGE_BYTES, MAX_SAMPLES, MODALITIES, PROTOCOL
@@ -36,6 +38,7 @@ from realpen.live.store import StrokeStore
 
 STATIC_DIR = Path(str(files(__package__) / "static"))
 NO_CACHE = {"Cache-Control": "no-cache"}
+DEVICE_LOG_PAGE = 1000  # entries per device-log response: one response never stalls the pens
 
 
 @dataclass
@@ -93,16 +96,17 @@ class LiveState:
         self.sessions[session.id] = session
         return session
 
-    def close_session(self, session: Session) -> None:
-        session.close()
+    async def close_session(self, session: Session) -> None:
         self.sessions.pop(session.id, None)
+        await session.close()
 
     def shutdown(self) -> None:
         """Close the pages' sessions, the store and the device (once; later calls do nothing)."""
         if self.final_counts is not None:
             return
         for session in list(self.sessions.values()):
-            self.close_session(session)
+            session.close_now()
+        self.sessions.clear()
         self.final_counts = self.store.count()
         self.store.close()
         self.device.close()
@@ -131,6 +135,7 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
                   docs_url=None, redoc_url=None, openapi_url=None)
     app.state.live = state
     app.add_middleware(AccessGuard, token=settings.token, allowed_hosts=settings.allowed_hosts)
+    app.add_middleware(SecurityHeaders)  # outermost: refusals carry the headers too
     app.mount("/static", NoCacheStatic(directory=STATIC_DIR), name="static")
 
     @app.get("/", response_class=HTMLResponse)
@@ -159,13 +164,15 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
                         headers={**NO_CACHE, "ETag": f'"{entry.profile.version}-{part}"'})
 
     @app.get("/api/device/log")
-    def device_log(since: int = Query(0, ge=0),
-                   limit: int = Query(100_000, ge=1, le=100_000)) -> dict:
+    def device_log(since: int = Query(0, ge=0, le=2**53),
+                   limit: int = Query(DEVICE_LOG_PAGE, ge=1, le=DEVICE_LOG_PAGE)) -> dict:
         entries = getattr(state.device, "entries", None)
         if entries is None:
             raise HTTPException(404, f"the {state.device.name} device keeps no log")
-        return {"device": state.device.name, "count": state.device.count,
-                "entries": [entry.to_json() for entry in entries(since, limit)]}
+        page = [entry.to_json() for entry in entries(since, limit)]
+        # `next` is the `since` of the following page; `next == count`: this was the last.
+        return {"device": state.device.name, "count": state.device.count, "entries": page,
+                "next": page[-1]["index"] + 1 if page else since}
 
     @app.get("/api/status")
     def status() -> dict:
@@ -183,10 +190,14 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
                 if frame["type"] == "websocket.disconnect":
                     break
                 raw = frame["text"] if frame.get("text") is not None else frame.get("bytes", b"")
-                await websocket.send_text(session.handle(raw).model_dump_json(exclude_none=True))
+                # One message at a time: the next frame is read once this one is stored and
+                # acknowledged. That is the backpressure: a page that sends faster than the
+                # store writes waits in its own TCP window, and no one else does.
+                reply = await session.handle(raw)
+                await websocket.send_text(reply.model_dump_json(exclude_none=True))
         except (WebSocketDisconnect, OSError, RuntimeError):
             pass
         finally:
-            state.close_session(session)
+            await state.close_session(session)
 
     return app

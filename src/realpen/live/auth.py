@@ -9,6 +9,14 @@ Two further checks close the holes a server on 127.0.0.1 would otherwise have ag
 pages on other sites: a WebSocket handshake whose ``Origin`` is not the server's own is refused
 (403), and with ``allowed_hosts`` (the loopback names, by default) a request whose ``Host`` is
 another name is refused (400), which defeats DNS rebinding.
+
+Other sites' pages may not use the server at all: an HTTP request that the browser marks
+``Sec-Fetch-Site: cross-site`` or ``same-site`` (another port of this machine is "same site"),
+or whose ``Origin`` is not the server's own, is refused (403) — except following a link to the
+writing page itself, which is harmless as the page may not be framed. :class:`SecurityHeaders`
+adds to every response a Content-Security-Policy that allows only the server's own scripts,
+styles and connections and no framing, ``X-Frame-Options: DENY``, ``nosniff`` and
+``Referrer-Policy: no-referrer`` (the LAN token in a URL is never sent elsewhere).
 """
 
 from __future__ import annotations
@@ -22,6 +30,19 @@ from starlette.responses import PlainTextResponse
 
 COOKIE = "realpen_token"
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+CONTENT_SECURITY_POLICY = (
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
+    "media-src 'self' blob:; connect-src 'self'; font-src 'self'; manifest-src 'self'; "
+    "base-uri 'none'; form-action 'self'; frame-ancestors 'none'")
+SECURITY_HEADERS = (
+    (b"content-security-policy", CONTENT_SECURITY_POLICY.encode()),
+    (b"x-frame-options", b"DENY"),
+    (b"x-content-type-options", b"nosniff"),
+    (b"referrer-policy", b"no-referrer"),
+    (b"cross-origin-opener-policy", b"same-origin"),
+    (b"cross-origin-resource-policy", b"same-origin"),
+)
+ALLOWED_FETCH_SITES = ("same-origin", "none")  # "none": typed, bookmarked, opened by the user
 
 
 def new_token() -> str:
@@ -47,9 +68,11 @@ class AccessGuard:
         if self.allowed_hosts is not None and _hostname(host) not in self.allowed_hosts:
             return 400, "invalid Host header"
         origin = headers.get("origin")
-        if scope["type"] == "websocket" and origin and urlsplit(origin).netloc.lower() != \
-                host.lower():
+        foreign_origin = bool(origin) and urlsplit(origin).netloc.lower() != host.lower()
+        if scope["type"] == "websocket" and foreign_origin:
             return 403, "cross-origin WebSocket refused"
+        if scope["type"] == "http" and (foreign_origin or _cross_site(scope, headers)):
+            return 403, "requests from other sites are refused"
         if self.token is None:
             return None
         query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
@@ -92,6 +115,39 @@ class AccessGuard:
             await send(message)
 
         await self.app(scope, receive, send_with_cookie)
+
+
+def _cross_site(scope, headers: Headers) -> bool:
+    """A browser request made by another site's page (Fetch Metadata), other than following a
+    link to the writing page."""
+    site = headers.get("sec-fetch-site")
+    if site is None or site in ALLOWED_FETCH_SITES:
+        return False
+    navigation = headers.get("sec-fetch-mode") == "navigate" and \
+        headers.get("sec-fetch-dest") == "document"
+    return not (navigation and scope.get("method") == "GET" and scope.get("path") == "/")
+
+
+class SecurityHeaders:
+    """ASGI middleware adding :data:`SECURITY_HEADERS` to every HTTP response."""
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        async def send_with_headers(message):
+            if message["type"] == "http.response.start":
+                present = {name.lower() for name, _ in message.get("headers", [])}
+                extra = [(name, value) for name, value in SECURITY_HEADERS
+                         if name not in present]
+                message = {**message, "headers": [*message.get("headers", []), *extra]}
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
 
 
 def _cookie(header: str, name: str) -> str | None:

@@ -17,6 +17,7 @@ commands with their arrival times, which tests and ``GET /api/device/log`` read.
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from collections import deque
@@ -134,4 +135,4 @@ class SimulatedDevice:
             first = self._count - len(self._log)
             start = max(since - first, 0)
             stop = len(self._log) if limit is None else min(len(self._log), start + limit)
-            return [self._log[i] for i in range(start, stop)]
+            return list(itertools.islice(self._log, start, stop))  # deque[i] is O(n) each

@@ -2,10 +2,14 @@
 
 The page sends JSON text frames, one message each, told apart by ``type``:
 
-``hello``     once per connection: who is talking (``client``) and the ``protocol`` number;
+``hello``     once per connection: who is talking (``client``), the ``protocol`` number, and
+              the page's own id (``page``, optional): the same across its reconnects, so that
+              what it resends after a reconnect is recognised and stored once;
 ``pen_down``  a stroke starts: the pen (profile name and content version), the modality, the
               ink (visible or hidden), the pointer type and the page's calibration (px/mm);
-``samples``   a batch of the stroke's samples (the coalesced pointer events of one event);
+``samples``   a batch of the stroke's samples (the coalesced pointer events of one event),
+              with ``index``, the number of its first sample within the stroke (optional; a
+              sample number already stored is not stored again);
 ``gain``      the stroke's new target gain (Eq. 1 before smoothing), for the pen's actuator;
 ``pen_up``    the stroke ends.
 
@@ -13,6 +17,10 @@ Every message carries ``seq``, the page's message counter, and the server replie
 ``ack`` (echoing ``seq``, with the server's receive time) or ``error`` (a ``code`` and a
 one-line ``message``; ``seq`` when it could be read). A message larger than
 :data:`MAX_MESSAGE_BYTES` or holding more than :data:`MAX_SAMPLES` samples is refused.
+
+A page keeps every message until it is acknowledged and, after a reconnect, sends again those
+that were not: pen-downs, samples and pen-ups are idempotent (by page, stroke and sample
+number), so nothing is lost and nothing is stored twice.
 
 Types are strict: a number is a JSON number (an integer where one is counted: ``seq``,
 ``stroke``), a flag is ``true`` or ``false``, text is a string; nothing is coerced.
@@ -39,6 +47,7 @@ from realpen.io.strokes import StrokeSample, Time
 from realpen.profile.schema import NAME_PATTERN  # pydantic-only: the name rule's one home
 
 __all__ = ["PROTOCOL", "MAX_MESSAGE_BYTES", "MAX_SAMPLES", "MODALITIES", "NAME_PATTERN",
+           "PAGE_PATTERN",
            "Sample", "Hello", "PenDown", "Samples", "Gain", "PenUp", "ClientMessage",
            "CLIENT_MESSAGE", "Ack", "Error", "MessageError", "parse_message"]
 
@@ -52,6 +61,8 @@ Ink = Literal["visible", "hidden"]
 PointerType = Literal["pen", "touch", "mouse", "unknown"]
 ErrorCode = Literal["binary", "too_large", "invalid_json", "invalid_message", "protocol",
                     "unknown_pen", "store", "internal"]
+
+PAGE_PATTERN = r"^[A-Za-z0-9_-]{8,64}$"
 
 Seq = Annotated[int, Field(ge=0, le=2**53)]
 StrokeNo = Annotated[int, Field(ge=0, le=2**53)]
@@ -70,6 +81,7 @@ class Hello(_Message):
     seq: Seq
     client: str = Field(min_length=1, max_length=200)
     protocol: Literal[1] = PROTOCOL
+    page: str | None = Field(None, pattern=PAGE_PATTERN)
 
 
 Sample = StrokeSample
@@ -99,6 +111,7 @@ class Samples(_Message):
     seq: Seq
     stroke: StrokeNo
     samples: list[Sample] = Field(min_length=1, max_length=MAX_SAMPLES)
+    index: int | None = Field(None, ge=0, le=2**53)
 
 
 class Gain(_Message):

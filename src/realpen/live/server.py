@@ -4,17 +4,86 @@ The socket is bound before uvicorn starts, so port 0 (any free port) still print
 real URL, and a port in use is one clear error. uvicorn handles SIGINT/SIGTERM: it stops
 accepting, closes the WebSockets (each page's open stroke is ended), then the app's shutdown
 closes the store, whose every stroke was committed as it was drawn.
+
+Slow and idle clients are timed out: a request's head (request line and headers) must arrive
+within :data:`REQUEST_HEAD_TIMEOUT_S`, an idle keep-alive connection is closed after
+:data:`KEEP_ALIVE_S`, and at most :data:`MAX_CONNECTIONS` connections are served at once (more
+get 503). WebSocket keepalive pings allow :data:`WS_PING_TIMEOUT_S` for the answer: a page
+under backpressure answers late, and must not be cut off for it.
 """
 
 from __future__ import annotations
 
+import logging
 import socket
 
 import uvicorn
+from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
 from realpen.errors import ParameterError
 
 WS_MAX_FRAME = 1024 * 1024  # frames above this are refused by the protocol layer (close 1009)
+REQUEST_HEAD_TIMEOUT_S = 10.0
+KEEP_ALIVE_S = 5
+MAX_CONNECTIONS = 1000
+WS_PING_INTERVAL_S = 20.0
+WS_PING_TIMEOUT_S = 60.0
+
+
+class TimedHttpProtocol(HttpToolsProtocol):
+    """uvicorn's HTTP protocol with a deadline for each request's head.
+
+    uvicorn times out idle keep-alive connections, but not a connection that never sends a
+    request, or sends half of one's headers and stops (each would hold a connection forever).
+    """
+
+    _head_deadline = None
+    head_timeout_s = REQUEST_HEAD_TIMEOUT_S
+
+    def _arm_head_deadline(self) -> None:
+        self._disarm_head_deadline()
+        self._head_deadline = self.loop.call_later(self.head_timeout_s, self._head_timeout)
+
+    def _disarm_head_deadline(self) -> None:
+        if self._head_deadline is not None:
+            self._head_deadline.cancel()
+            self._head_deadline = None
+
+    def _head_timeout(self) -> None:
+        self._head_deadline = None
+        if not self.transport.is_closing():
+            self.transport.close()
+
+    def connection_made(self, transport) -> None:
+        super().connection_made(transport)
+        self._arm_head_deadline()
+
+    def on_message_begin(self) -> None:
+        super().on_message_begin()
+        self._arm_head_deadline()
+
+    def on_headers_complete(self) -> None:
+        self._disarm_head_deadline()
+        super().on_headers_complete()
+
+    def connection_lost(self, exc) -> None:
+        self._disarm_head_deadline()
+        super().connection_lost(exc)
+
+
+class OneLineFrameErrors(logging.Filter):
+    """Logs a WebSocket text frame that is not UTF-8 as one line (uvicorn logs a traceback)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.getMessage().startswith("Invalid UTF-8"):
+            record.msg, record.args = ("WebSocket: a text frame that is not valid UTF-8 was "
+                                       "refused (connection closed with 1007)"), ()
+            record.exc_info = record.exc_text = None
+            record.levelno, record.levelname = logging.WARNING, "WARNING"
+        return True
+
+
+ONE_LINE_FRAME_ERRORS = OneLineFrameErrors()  # one instance: adding it twice is a no-op
 
 
 def bind(host: str, port: int) -> socket.socket:
@@ -62,12 +131,23 @@ def url_host(host: str) -> str:
     return f"[{host}]" if ":" in host else host
 
 
-def run(app, sock: socket.socket, log_level: str = "warning") -> None:
-    """Serve ``app`` on ``sock`` until SIGINT/SIGTERM; returns after a graceful shutdown.
+def server_config(app, log_level: str = "warning",
+                  head_timeout_s: float = REQUEST_HEAD_TIMEOUT_S) -> uvicorn.Config:
+    """The uvicorn configuration of the live server (timeouts and limits above).
 
     The access log is off: in LAN mode every request line would carry the token.
     """
+    http = type("TimedHttpProtocol", (TimedHttpProtocol,), {"head_timeout_s": head_timeout_s})
     config = uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="on",
-                            ws_max_size=WS_MAX_FRAME, ws_per_message_deflate=False,
+                            http=http, ws_max_size=WS_MAX_FRAME, ws_per_message_deflate=False,
+                            ws_ping_interval=WS_PING_INTERVAL_S, ws_ping_timeout=WS_PING_TIMEOUT_S,
+                            timeout_keep_alive=KEEP_ALIVE_S, limit_concurrency=MAX_CONNECTIONS,
                             timeout_graceful_shutdown=5)
-    uvicorn.Server(config).run(sockets=[sock])
+    # After Config: it configures uvicorn's loggers.
+    logging.getLogger("uvicorn.error").addFilter(ONE_LINE_FRAME_ERRORS)
+    return config
+
+
+def run(app, sock: socket.socket, log_level: str = "warning") -> None:
+    """Serve ``app`` on ``sock`` until SIGINT/SIGTERM; returns after a graceful shutdown."""
+    uvicorn.Server(server_config(app, log_level)).run(sockets=[sock])

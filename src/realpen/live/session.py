@@ -5,6 +5,12 @@ One :class:`Session` per connection. A page has at most one stroke down at a tim
 closes with a stroke down ends it (``disconnect``), so the device always hears a ``pen_up`` for
 every ``pen_down`` and no stroke is left open in the store.
 
+A page that reconnects says who it is (``hello.page``) and sends again what was not
+acknowledged: its strokes are found in the store by page and stroke number, and samples and
+pen-ups for a stroke the server had ended for it (``disconnect``, ``crash``) are taken, each
+sample once. The reply to a message is sent only after the store has committed it, so an ack
+means the data is on disk.
+
 The device is told first and the store second, so the pen's actuator never waits for the disk.
 Nothing a page sends can raise out of :meth:`Session.handle`: every problem becomes an
 ``error`` reply and the connection stays open.
@@ -12,6 +18,7 @@ Nothing a page sends can raise out of :meth:`Session.handle`: every problem beco
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import sqlite3
 import time
@@ -45,7 +52,7 @@ class OpenStroke:
     """The stroke a page has down."""
 
     number: int
-    stroke_id: int
+    stroke_id: int | None  # None until the store has recorded the pen-down
     a_max: float
     tactile: bool
 
@@ -56,19 +63,20 @@ class Session:
     def __init__(self, catalog: Catalog, store: StrokeStore, device: PenDevice,
                  max_message_bytes: int = MAX_MESSAGE_BYTES):
         self.id = uuid.uuid4().hex[:12]
+        self.page = self.id  # until the page's hello names it
         self.catalog, self.store, self.device = catalog, store, device
         self.max_message_bytes = max_message_bytes
         self.stroke: OpenStroke | None = None
         self.received = self.refused = 0
 
-    def handle(self, raw: str | bytes) -> Ack | Error:
-        """Handle one frame and return the reply to send."""
+    async def handle(self, raw: str | bytes) -> Ack | Error:
+        """Handle one frame and return the reply to send (after the store committed it)."""
         arrived = time.monotonic_ns()
         self.received += 1
         message = None
         try:
             message = parse_message(raw, self.max_message_bytes)
-            extra = self._dispatch(message)
+            extra = await self._dispatch(message)
             return Ack(seq=message.seq, of=message.type, server_ns=arrived, **extra)
         except MessageError as error:
             self.refused += 1
@@ -79,20 +87,25 @@ class Session:
             self.refused += 1
             log.error("stroke store: %s", error)
             return Error(seq=getattr(message, "seq", None), code="store",
-                         message=f"the stroke store could not record it ({error})")
+                         message=f"the stroke store could not record it ({error}); send it "
+                                 f"again")
         except Exception:  # a bug must not take the connection or the server down
             self.refused += 1
             log.exception("session %s: unexpected error", self.id)
             return Error(seq=getattr(message, "seq", None), code="internal",
                          message="internal error (logged on the server)")
 
-    def _dispatch(self, message) -> dict:
+    async def _dispatch(self, message) -> dict:
         if isinstance(message, Samples):
-            self._require(message.stroke)
-            self.store.add_samples(self.stroke.stroke_id, message.samples)
+            stroke_id = await self._stroke_id(message.stroke)
+            await asyncio.wrap_future(self.store.append(stroke_id, message.samples,
+                                                        message.index))
             return {}
         if isinstance(message, Gain):
-            stroke = self._require(message.stroke)
+            stroke = self.stroke
+            if stroke is None or stroke.number != message.stroke:
+                await self._stroke_id(message.stroke)  # a resent gain of an earlier stroke
+                return {}
             if message.target > stroke.a_max * (1 + 1e-9):
                 raise MessageError("invalid_message", f"gain.target: {message.target:g} is above "
                                    f"the pen's a_max {stroke.a_max:g}")
@@ -100,16 +113,21 @@ class Session:
                 self.device.gain(Origin(self.id, message.stroke, message.seq), message.target)
             return {}
         if isinstance(message, PenDown):
-            return self._pen_down(message)
+            return await self._pen_down(message)
         if isinstance(message, PenUp):
-            self._require(message.stroke)
-            self._end("pen_up", message.seq)
+            if self.stroke is not None and self.stroke.number == message.stroke:
+                await self._end("pen_up", message.seq)
+            else:  # the page resends the pen-up of a stroke the server ended for it
+                stroke_id = await self._stroke_id(message.stroke)
+                await asyncio.wrap_future(self.store.end(stroke_id, "pen_up"))
             return {}
         if isinstance(message, Hello):
+            if message.page is not None:
+                self.page = message.page
             return {"session": self.id}
         raise MessageError("invalid_message", f"unhandled message type {message.type}")
 
-    def _pen_down(self, message: PenDown) -> dict:
+    async def _pen_down(self, message: PenDown) -> dict:
         entry = self.catalog.get(message.pen)
         if entry is None:
             raise MessageError("unknown_pen", f"pen_down.pen: no profile '{message.pen}' on this "
@@ -120,34 +138,53 @@ class Session:
                                f"'{message.pen}' version {message.profile_version}, the server "
                                f"{profile.version}; reload the page")
         if self.stroke is not None:
-            self._end("replaced", message.seq)
+            await self._end("replaced", message.seq)
         tactile = message.modality in TACTILE_MODALITIES
         self.device.pen_down(Origin(self.id, message.stroke, message.seq), profile, tactile)
-        stroke_id = self.store.begin_stroke(
-            session=self.id, page_stroke=message.stroke, pen=profile.name,
+        self.stroke = OpenStroke(message.stroke, None, profile.meta.coupling.a_max, tactile)
+        begun = self.store.begin(
+            session=self.id, page=self.page, page_stroke=message.stroke, pen=profile.name,
             profile_version=profile.version, modality=message.modality, ink=message.ink,
             pointer_type=message.pointer_type, px_per_mm=message.px_per_mm,
             calibrated=message.calibrated, page_t0=message.t)
-        self.stroke = OpenStroke(message.stroke, stroke_id, profile.meta.coupling.a_max, tactile)
-        return {"stroke_id": stroke_id}
+        self.stroke.stroke_id = await asyncio.wrap_future(begun)
+        return {"stroke_id": self.stroke.stroke_id}
 
-    def _require(self, number: int) -> OpenStroke:
-        if self.stroke is None or self.stroke.number != number:
+    async def _stroke_id(self, number: int) -> int:
+        """The store id of this page's stroke ``number``: the one down, or one the page drew
+        before (resent messages after a reconnect).
+
+        Raises:
+            MessageError: the page never put that stroke down.
+        """
+        if self.stroke is not None and self.stroke.number == number \
+                and self.stroke.stroke_id is not None:
+            return self.stroke.stroke_id
+        found = await asyncio.wrap_future(self.store.find(self.page, number))
+        if found is None:
             down = "no stroke is down" if self.stroke is None else \
                 f"stroke {self.stroke.number} is down"
             raise MessageError("protocol", f"stroke {number} is not down ({down})")
-        return self.stroke
+        return found.stroke_id
 
-    def _end(self, reason: str, seq: int | None = None) -> None:
+    async def _end(self, reason: str, seq: int | None = None) -> None:
         stroke, self.stroke = self.stroke, None
         if stroke is None:
             return
         self.device.pen_up(Origin(self.id, stroke.number, seq))
-        self.store.end_stroke(stroke.stroke_id, reason)
+        if stroke.stroke_id is not None:
+            await asyncio.wrap_future(self.store.end(stroke.stroke_id, reason))
 
-    def close(self) -> None:
-        """The connection closed: end a stroke left down."""
+    async def close(self) -> None:
+        """The connection closed: end a stroke left down (reason ``disconnect``)."""
         try:
-            self._end("disconnect")
+            await self._end("disconnect")
         except Exception:
             log.exception("session %s: closing", self.id)
+
+    def close_now(self) -> None:
+        """:meth:`close` from outside the event loop (the server's shutdown): the store's
+        ``shutdown`` pass ends the stroke, the device hears its pen-up here."""
+        stroke, self.stroke = self.stroke, None
+        if stroke is not None:
+            self.device.pen_up(Origin(self.id, stroke.number, None))

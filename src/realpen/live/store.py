@@ -1,21 +1,30 @@
 """The stroke store: one SQLite file (stdlib ``sqlite3``), written as strokes are drawn.
 
-Two tables. ``strokes``: one row per stroke — the page connection (``session``), the page's
-stroke number, the pen (profile name and content version), modality, ink, pointer type, the
-page's calibration, start and end times (UTC, server clock) and why it ended (``pen_up``,
-``disconnect``, ``replaced`` by a new pen-down, or ``shutdown``). ``samples``: one row per
-pen sample — the fields of the one stroke-sample definition
+Two tables. ``strokes``: one row per stroke — the page connection (``session``), the page that
+drew it (``page``: the page's own id, the same across its reconnects), the page's stroke number,
+the pen (profile name and content version), modality, ink, pointer type, the page's calibration,
+start and end times (UTC, server clock) and why it ended (``pen_up``, ``disconnect``,
+``replaced`` by a new pen-down, ``shutdown``, or ``crash``: found open when the store was opened
+again after the server was killed). ``samples``: one row per pen sample, numbered within its
+stroke (``seq``) — the fields of the one stroke-sample definition
 (:class:`realpen.io.strokes.StrokeSample`, :data:`SAMPLE_FIELDS` in that order): ``t`` in s
 since pen down, ``x``, ``y`` in mm, ``pressure`` 0–1, ``tilt_x``, ``tilt_y`` in degrees,
 ``speed`` in mm/s.
 
-Every pen-down, sample batch and pen-up is committed when it arrives (WAL journal,
-``synchronous=NORMAL``: a crash of the server loses nothing committed; closing checkpoints the
-journal back into the one file). A commit only appends to the journal; the checkpoints that
-copy it into the database, and fsync, run on a background thread every second, so the server's
-event loop (which also drives the pen's actuator) never waits for the disk. The SQL is plain so
-that a SQLAlchemy URL for PostgreSQL can stand in for the file when a lab outgrows one machine
-(a later issue).
+Nothing is stored twice: a stroke is known by its page and stroke number, a sample by its stroke
+and number, so a page that resends what it is not sure arrived (after a reconnect) changes
+nothing that is already stored.
+
+All writes run on one writer thread, in batches: whatever arrived while the last batch was
+being written goes into the next transaction, so many pages cost one commit, and the server's
+event loop (which also drives the pen's actuator) never waits for the disk. Each operation
+returns a :class:`concurrent.futures.Future` that resolves once its batch is committed (WAL
+journal, ``synchronous=NORMAL``: a crash of the server loses nothing committed). Between
+batches the writer checkpoints the journal back into the database and truncates it (every
+:data:`CHECKPOINT_S` or when it passes :data:`WAL_CHECKPOINT_BYTES`), so the journal stays small
+however long pages write. One server at a time may write a store (an exclusive ``flock`` on the
+file): a second is refused in one line. The SQL is plain so that a SQLAlchemy URL for
+PostgreSQL can stand in for the file when a lab outgrows one machine (a later issue).
 """
 
 from __future__ import annotations
@@ -24,21 +33,34 @@ import contextlib
 import csv
 import logging
 import os
+import queue
 import sqlite3
 import threading
-from collections.abc import Iterable, Sequence
-from datetime import UTC, datetime
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import Future
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 from realpen.errors import fail
 from realpen.io.files import atomic_path
 from realpen.io.strokes import SAMPLE_FIELDS, StrokeSample
 
-__all__ = ["StrokeStore", "export_csv", "SAMPLE_FIELDS", "STROKE_FIELDS", "CSV_COLUMNS",
-           "SCHEMA", "SCHEMA_VERSION", "CHECKPOINT_S"]
+try:  # advisory locks: POSIX only; elsewhere two servers on one store are not prevented
+    import fcntl
+except ImportError:  # pragma: no cover
+    fcntl = None
 
-SCHEMA_VERSION = 1
+__all__ = ["StrokeStore", "StrokeRef", "export_csv", "SAMPLE_FIELDS", "STROKE_FIELDS",
+           "CSV_COLUMNS", "SCHEMA", "SCHEMA_VERSION", "CHECKPOINT_S", "WAL_CHECKPOINT_BYTES",
+           "END_REASONS"]
+
+SCHEMA_VERSION = 2
 CHECKPOINT_S = 1.0
+WAL_CHECKPOINT_BYTES = 8 * 1024 * 1024
+"""The journal is checkpointed and truncated as soon as it passes this size (bytes)."""
+MAX_BATCH = 1024  # operations per transaction: bounds how long one commit holds the writer
+END_REASONS = ("pen_up", "disconnect", "replaced", "shutdown", "crash")
 log = logging.getLogger(__name__)
 STROKE_FIELDS = ("stroke", "session", "page_stroke", "pen", "profile_version", "modality", "ink",
                  "pointer_type", "px_per_mm", "calibrated", "started_at")
@@ -60,7 +82,8 @@ CREATE TABLE IF NOT EXISTS strokes (
     started_at TEXT NOT NULL,
     ended_at TEXT,
     end_reason TEXT,
-    sample_count INTEGER NOT NULL DEFAULT 0
+    sample_count INTEGER NOT NULL DEFAULT 0,
+    page TEXT
 );
 CREATE TABLE IF NOT EXISTS samples (
     stroke_id INTEGER NOT NULL REFERENCES strokes(id) ON DELETE CASCADE,
@@ -68,9 +91,17 @@ CREATE TABLE IF NOT EXISTS samples (
 """ + "".join(f"    {name} REAL NOT NULL,\n" for name in SAMPLE_FIELDS) + """\
     PRIMARY KEY (stroke_id, seq)
 ) WITHOUT ROWID;
+CREATE UNIQUE INDEX IF NOT EXISTS strokes_by_page ON strokes (page, page_stroke);
 """
-_INSERT_SAMPLE = (f"INSERT INTO samples (stroke_id, seq, {', '.join(SAMPLE_FIELDS)}) "
+# Version 1 had no page column: each connection was its own page.
+_UPGRADE_FROM_1 = """
+ALTER TABLE strokes ADD COLUMN page TEXT;
+UPDATE strokes SET page = session;
+CREATE UNIQUE INDEX IF NOT EXISTS strokes_by_page ON strokes (page, page_stroke);
+"""
+_INSERT_SAMPLE = (f"INSERT OR IGNORE INTO samples (stroke_id, seq, {', '.join(SAMPLE_FIELDS)}) "
                   f"VALUES ({', '.join('?' * (len(SAMPLE_FIELDS) + 2))})")
+_STOP = object()
 
 
 def _now() -> str:
@@ -78,11 +109,11 @@ def _now() -> str:
 
 
 def _connect(path: Path, create: bool) -> sqlite3.Connection:
-    """Open (or create) a store and check that it is one.
+    """Open (or create) a store, check that it is one, and bring its schema up to date.
 
     Raises:
         RealPenError: one line naming ``path``: no such store, a folder, a place where no file
-            can be made or opened, or a file that is not a RealPen stroke store.
+            can be made or opened, a file that is not a RealPen stroke store, or a damaged one.
     """
     if not create and not path.exists():
         raise fail(path, "no such stroke store")
@@ -94,7 +125,8 @@ def _connect(path: Path, create: bool) -> sqlite3.Connection:
     try:
         if create:
             path.parent.mkdir(parents=True, exist_ok=True)
-        connection = sqlite3.connect(path, check_same_thread=False, timeout=5.0)
+        connection = sqlite3.connect(path, check_same_thread=False, timeout=5.0,
+                                     isolation_level=None)
     except (OSError, sqlite3.Error) as error:
         raise fail(path, f"cannot open or create the stroke store here "
                          f"({getattr(error, 'strerror', None) or error})") from None
@@ -108,129 +140,355 @@ def _connect(path: Path, create: bool) -> sqlite3.Connection:
         connection.execute("PRAGMA journal_mode=WAL")
         connection.execute("PRAGMA synchronous=NORMAL")
         connection.execute("PRAGMA foreign_keys=ON")
+        if version > 0:
+            problem = connection.execute("PRAGMA quick_check(1)").fetchone()[0]
+            if problem != "ok":
+                problem = " ".join(problem.replace("*** in database main ***", "").split())
+                raise fail(path, f"the stroke store is damaged ({problem}); keep a copy and "
+                                 f"start with a new store")
         if version == 0:
             tables = {row[0] for row in connection.execute(
                 "SELECT name FROM sqlite_master WHERE type='table'")}
             if tables - {"strokes", "samples", "sqlite_sequence"}:
                 raise fail(path, "an SQLite file that is not a RealPen stroke store")
-            connection.executescript(SCHEMA)
+        if version < SCHEMA_VERSION and create:
+            connection.execute("BEGIN IMMEDIATE")
+            for statement in (SCHEMA if version == 0 else _UPGRADE_FROM_1).split(";"):
+                if statement.strip():
+                    connection.execute(statement)
             connection.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
-            connection.commit()
+            connection.execute("COMMIT")
     except sqlite3.OperationalError as error:  # unreadable, read-only, locked, out of space
         connection.close()
         raise fail(path, f"cannot use the stroke store ({error})") from None
-    except sqlite3.DatabaseError as error:  # e.g. "file is not a database"
+    except sqlite3.DatabaseError as error:  # e.g. "file is not a database", a damaged page
         connection.close()
-        raise fail(path, f"not a RealPen stroke store ({error})") from None
+        raise fail(path, f"not a RealPen stroke store, or a damaged one ({error})") from None
     except BaseException:
         connection.close()
         raise
     return connection
 
 
-class StrokeStore:
-    """The store the server writes to. Safe to share between threads (one lock)."""
+class StrokeRef(tuple):
+    """A stroke found by its page and number: ``(stroke_id, end_reason)``."""
 
-    def __init__(self, path: str | os.PathLike, checkpoint_s: float = CHECKPOINT_S):
+    __slots__ = ()
+
+    @property
+    def stroke_id(self) -> int:
+        return self[0]
+
+    @property
+    def end_reason(self) -> str | None:
+        return self[1]
+
+
+class StrokeStore:
+    """The store the server writes to. Every method may be called from any thread.
+
+    Writing methods come in two forms: ``begin``/``append``/``end`` return a
+    :class:`~concurrent.futures.Future` (resolved when committed; the live server awaits it),
+    ``begin_stroke``/``add_samples``/``end_stroke`` wait for it.
+    """
+
+    def __init__(self, path: str | os.PathLike, checkpoint_s: float = CHECKPOINT_S,
+                 wal_checkpoint_bytes: int = WAL_CHECKPOINT_BYTES):
         self.path = Path(path)
         self.created = not self.path.exists()  # this store made the file (see discard)
+        self._lock_fd: int | None = None
         try:
             self._db = _connect(self.path, create=True)
+            self._take_lock()
+            self.recovered = self._close_crashed_strokes()
         except BaseException:
+            self._release_lock()
+            if getattr(self, "_db", None) is not None:
+                self._db.close()
             if self.created:
                 _remove_store_files(self.path)
             raise
         self._db.execute("PRAGMA wal_autocheckpoint=0")
-        self._lock = threading.Lock()
-        self._open: dict[int, tuple[float, int]] = {}  # stroke id → (page t0, samples so far)
-        self._stop = threading.Event()
-        self._checkpointer = threading.Thread(target=self._checkpoints, args=(checkpoint_s,),
-                                              name="realpen-store-checkpoint", daemon=True)
-        self._checkpointer.start()
+        self._db.execute(f"PRAGMA journal_size_limit={wal_checkpoint_bytes}")
+        self._checkpoint_s = checkpoint_s
+        self._wal_checkpoint_bytes = wal_checkpoint_bytes
+        self.largest_wal = 0  # bytes: the largest journal seen before a checkpoint
+        self._t0: dict[int, float] = {}  # stroke id → page t0 (writer thread only)
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._closed = False
+        self._close_lock = threading.Lock()
+        self._writer = threading.Thread(target=self._write_loop, name="realpen-store-writer",
+                                        daemon=True)
+        self._writer.start()
 
-    def _checkpoints(self, every_s: float) -> None:
-        """Copy the journal into the database now and then, off the event loop."""
-        connection = sqlite3.connect(self.path, timeout=5.0)
+    # ---- ownership and recovery ---------------------------------------------------------
+
+    def _take_lock(self) -> None:
+        if fcntl is None:
+            return
+        fd = os.open(self.path, os.O_RDONLY)
         try:
-            while not self._stop.wait(every_s):
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            raise fail(self.path, "is in use by another RealPen server; stop it or use "
+                                  "another store file") from None
+        self._lock_fd = fd
+
+    def _release_lock(self) -> None:
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)  # closing the descriptor releases the flock
+            self._lock_fd = None
+
+    def _close_crashed_strokes(self) -> int:
+        """End strokes a killed server left open (reason ``crash``); returns how many.
+
+        Their end time is their start plus their last sample's time: the last moment the
+        stroke is known to have been drawn.
+        """
+        open_strokes = self._db.execute(
+            "SELECT s.id, s.started_at, (SELECT MAX(t) FROM samples WHERE stroke_id = s.id) "
+            "FROM strokes s WHERE s.ended_at IS NULL").fetchall()
+        if not open_strokes:
+            return 0
+        self._db.execute("BEGIN IMMEDIATE")
+        for stroke_id, started_at, last_t in open_strokes:
+            try:
+                ended = datetime.fromisoformat(started_at) + timedelta(seconds=last_t or 0.0)
+                ended_at = ended.isoformat(timespec="milliseconds")
+            except (ValueError, OverflowError):
+                ended_at = started_at
+            self._db.execute("UPDATE strokes SET ended_at=?, end_reason='crash' WHERE id=?",
+                             (ended_at, stroke_id))
+        self._db.execute("COMMIT")
+        log.warning("%s: %d stroke(s) left open by a server that stopped without closing the "
+                    "store were ended (end_reason 'crash')", self.path, len(open_strokes))
+        return len(open_strokes)
+
+    # ---- the writer thread --------------------------------------------------------------
+
+    def _submit(self, operation: Callable, *args) -> Future:
+        future: Future = Future()
+        if self._closed:
+            future.set_exception(sqlite3.ProgrammingError("the stroke store is closed"))
+            return future
+        self._queue.put((future, operation, args))
+        return future
+
+    def _write_loop(self) -> None:
+        db, last_checkpoint, stopping = self._db, time.monotonic(), False
+        while not stopping:
+            batch = []
+            item = self._queue.get()
+            while True:
+                if item is _STOP:
+                    stopping = True
+                    break
+                batch.append(item)
+                if len(batch) >= MAX_BATCH:
+                    break
                 try:
-                    connection.execute("PRAGMA wal_checkpoint(PASSIVE)")
-                except sqlite3.Error as error:  # e.g. busy: the next round catches up
-                    log.debug("checkpoint: %s", error)
-        finally:
-            connection.close()
+                    item = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+            if batch:
+                self._write_batch(db, batch)
+            if stopping or time.monotonic() - last_checkpoint >= self._checkpoint_s or \
+                    self._wal_size() >= self._wal_checkpoint_bytes:
+                self._checkpoint(db)
+                last_checkpoint = time.monotonic()
 
-    def begin_stroke(self, *, session: str, page_stroke: int, pen: str, profile_version: str,
-                     modality: str, ink: str, pointer_type: str, px_per_mm: float,
-                     calibrated: bool, page_t0: float) -> int:
-        """Record a pen-down; returns the stroke's id in the store."""
-        with self._lock:
-            cursor = self._db.execute(
-                "INSERT INTO strokes (session, page_stroke, pen, profile_version, modality, ink, "
-                "pointer_type, px_per_mm, calibrated, page_t0, started_at) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (session, page_stroke, pen, profile_version, modality, ink, pointer_type,
-                 px_per_mm, int(calibrated), page_t0, _now()))
-            self._db.commit()
-            stroke_id = int(cursor.lastrowid)
-            self._open[stroke_id] = (page_t0, 0)
-            return stroke_id
+    def _write_batch(self, db: sqlite3.Connection, batch: list) -> None:
+        outcomes = []
+        try:
+            db.execute("BEGIN IMMEDIATE")
+            for future, operation, args in batch:
+                if not future.set_running_or_notify_cancel():
+                    continue
+                db.execute("SAVEPOINT operation")
+                try:
+                    outcomes.append((future, operation(db, *args), None))
+                except Exception as error:  # this operation only; the batch goes on
+                    db.execute("ROLLBACK TO operation")
+                    outcomes.append((future, None, error))
+                db.execute("RELEASE operation")
+            db.execute("COMMIT")
+        except sqlite3.Error as error:  # the commit failed (disk full, I/O): nothing stored
+            log.error("%s: stroke store: %s", self.path, error)
+            with contextlib.suppress(sqlite3.Error):
+                db.execute("ROLLBACK")
+            self._t0.clear()
+            for future, _, _ in batch:
+                if future.running():
+                    future.set_exception(error)
+            return
+        for future, value, error in outcomes:
+            if error is None:
+                future.set_result(value)
+            else:
+                future.set_exception(error)
 
-    def add_samples(self, stroke_id: int,
-                    samples: Sequence[StrokeSample | Sequence[float]]) -> int:
-        """Append samples to an open stroke; returns the stroke's sample count.
+    def _wal_size(self) -> int:
+        try:
+            size = os.stat(f"{self.path}-wal").st_size
+        except OSError:
+            return 0
+        self.largest_wal = max(self.largest_wal, size)
+        return size
+
+    def _checkpoint(self, db: sqlite3.Connection) -> None:
+        """Copy the journal into the database and truncate it (the writer is idle here)."""
+        self._wal_size()
+        try:
+            db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except sqlite3.Error as error:  # e.g. a reader in another process: next round
+            log.debug("checkpoint: %s", error)
+
+    # ---- operations (run on the writer thread, inside a transaction) --------------------
+
+    def _begin(self, db, fields: dict) -> int:
+        row = db.execute("SELECT id, end_reason, page_t0 FROM strokes WHERE page=? AND "
+                         "page_stroke=?", (fields["page"], fields["page_stroke"])).fetchone()
+        if row is not None:  # the page sent this pen-down before (a resend after a reconnect)
+            stroke_id, reason, page_t0 = row
+            if reason is not None and reason != "pen_up":
+                db.execute("UPDATE strokes SET ended_at=NULL, end_reason=NULL WHERE id=?",
+                           (stroke_id,))
+            self._t0[stroke_id] = page_t0
+            return int(stroke_id)
+        names = list(fields) + ["started_at"]
+        cursor = db.execute(
+            f"INSERT INTO strokes ({', '.join(names)}) VALUES ({', '.join('?' * len(names))})",
+            (*fields.values(), _now()))
+        stroke_id = int(cursor.lastrowid)
+        self._t0[stroke_id] = fields["page_t0"]
+        return stroke_id
+
+    def _append(self, db, stroke_id: int, rows: list[tuple], first: int | None) -> int:
+        t0 = self._t0.get(stroke_id)
+        if t0 is None:
+            found = db.execute("SELECT page_t0 FROM strokes WHERE id=?", (stroke_id,)).fetchone()
+            if found is None:
+                raise KeyError(f"no stroke with id {stroke_id}")
+            t0 = self._t0[stroke_id] = found[0]
+        if first is None:  # no numbering from the page: append after what is stored
+            first = db.execute("SELECT sample_count FROM strokes WHERE id=?",
+                               (stroke_id,)).fetchone()[0]
+        cursor = db.executemany(_INSERT_SAMPLE, [(stroke_id, first + i, s[0] - t0, *s[1:])
+                                                 for i, s in enumerate(rows)])
+        if cursor.rowcount:
+            db.execute("UPDATE strokes SET sample_count = sample_count + ? WHERE id=?",
+                       (cursor.rowcount, stroke_id))
+        return db.execute("SELECT sample_count FROM strokes WHERE id=?",
+                          (stroke_id,)).fetchone()[0]
+
+    def _end(self, db, stroke_id: int, reason: str) -> bool:
+        # A pen-up is the stroke's true end: it replaces an end the server had to guess
+        # (disconnect, crash) when the page resends it after a reconnect.
+        condition = "(ended_at IS NULL OR end_reason != 'pen_up')" if reason == "pen_up" \
+            else "ended_at IS NULL"
+        cursor = db.execute(f"UPDATE strokes SET ended_at=?, end_reason=? WHERE id=? AND "
+                            f"{condition}", (_now(), reason, stroke_id))
+        self._t0.pop(stroke_id, None)
+        return cursor.rowcount > 0
+
+    def _end_all(self, db, reason: str) -> int:
+        cursor = db.execute("UPDATE strokes SET ended_at=?, end_reason=? WHERE ended_at IS NULL",
+                            (_now(), reason))
+        self._t0.clear()
+        return cursor.rowcount
+
+    @staticmethod
+    def _find(db, page: str, page_stroke: int) -> StrokeRef | None:
+        row = db.execute("SELECT id, end_reason FROM strokes WHERE page=? AND page_stroke=?",
+                         (page, page_stroke)).fetchone()
+        return None if row is None else StrokeRef((int(row[0]), row[1]))
+
+    @staticmethod
+    def _count(db) -> tuple[int, int]:
+        strokes, samples = db.execute(
+            "SELECT COUNT(*), COALESCE(SUM(sample_count), 0) FROM strokes").fetchone()
+        return int(strokes), int(samples)
+
+    # ---- the public interface -----------------------------------------------------------
+
+    def begin(self, *, session: str, page_stroke: int, pen: str, profile_version: str,
+              modality: str, ink: str, pointer_type: str, px_per_mm: float, calibrated: bool,
+              page_t0: float, page: str | None = None) -> Future:
+        """Record a pen-down (once per page and stroke number); resolves to the stroke's id.
+
+        ``page`` is the page's own id (default: ``session``); ``page_t0`` the pen-down time in
+        s on the page's clock. A pen-down the page already sent returns the same stroke, and
+        reopens it if the server had ended it for the page (a disconnect, a crash).
+        """
+        fields = {"session": session, "page": page or session, "page_stroke": page_stroke,
+                  "pen": pen, "profile_version": profile_version, "modality": modality,
+                  "ink": ink, "pointer_type": pointer_type, "px_per_mm": px_per_mm,
+                  "calibrated": int(calibrated), "page_t0": page_t0}
+        return self._submit(self._begin, fields)
+
+    def append(self, stroke_id: int, samples: Sequence[StrokeSample | Sequence[float]],
+               first: int | None = None) -> Future:
+        """Add samples to a stroke; resolves to the stroke's sample count.
 
         Args:
-            stroke_id: the stroke's id in the store (from :meth:`begin_stroke`).
+            stroke_id: the stroke's id in the store (from :meth:`begin`).
             samples: :class:`~realpen.io.strokes.StrokeSample` rows, or tuples of their
                 :data:`SAMPLE_FIELDS` (``t`` in s on the page clock, mm, mm, 0–1, degrees,
                 degrees, mm/s); ``t`` is stored in s since pen down.
+            first: the number of the first sample within the stroke, as the page counts
+                (a sample number already stored is not stored again); None: after the last.
         """
         rows = [sample.as_row() if isinstance(sample, StrokeSample) else tuple(sample)
                 for sample in samples]
-        with self._lock:
-            t0, count = self._open[stroke_id]
-            rows = [(stroke_id, count + i, s[0] - t0, *s[1:]) for i, s in enumerate(rows)]
-            self._db.executemany(_INSERT_SAMPLE, rows)
-            count += len(rows)
-            self._db.execute("UPDATE strokes SET sample_count=? WHERE id=?", (count, stroke_id))
-            self._db.commit()
-            self._open[stroke_id] = (t0, count)
-            return count
+        return self._submit(self._append, stroke_id, rows, first)
+
+    def end(self, stroke_id: int, reason: str = "pen_up") -> Future:
+        """Record the end of a stroke (one of :data:`END_REASONS`); resolves to whether
+        anything changed (an ended stroke stays ended, except that a pen-up replaces a guessed
+        end)."""
+        if reason not in END_REASONS:
+            raise ValueError(f"reason must be one of {END_REASONS}, got {reason!r}")
+        return self._submit(self._end, stroke_id, reason)
+
+    def find(self, page: str, page_stroke: int) -> Future:
+        """Resolves to the :class:`StrokeRef` of a page's stroke, or None."""
+        return self._submit(self._find, page, page_stroke)
+
+    def begin_stroke(self, **fields) -> int:
+        """:meth:`begin`, waiting for the commit; returns the stroke's id."""
+        return self.begin(**fields).result()
+
+    def add_samples(self, stroke_id: int, samples: Sequence[StrokeSample | Sequence[float]],
+                    first: int | None = None) -> int:
+        """:meth:`append`, waiting for the commit; returns the stroke's sample count."""
+        return self.append(stroke_id, samples, first).result()
 
     def end_stroke(self, stroke_id: int, reason: str = "pen_up") -> None:
-        """Record the end of a stroke (once; later calls do nothing)."""
-        with self._lock:
-            if self._open.pop(stroke_id, None) is None:
-                return
-            self._db.execute("UPDATE strokes SET ended_at=?, end_reason=? WHERE id=?",
-                             (_now(), reason, stroke_id))
-            self._db.commit()
+        """:meth:`end`, waiting for the commit."""
+        self.end(stroke_id, reason).result()
 
     def count(self) -> tuple[int, int]:
-        """(strokes, samples) in the store."""
-        with self._lock:
-            strokes = self._db.execute("SELECT COUNT(*) FROM strokes").fetchone()[0]
-            samples = self._db.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
-            return int(strokes), int(samples)
+        """(strokes, samples) in the store (after everything submitted before)."""
+        return self._submit(self._count).result()
 
     def close(self) -> None:
-        """End strokes still open (reason ``shutdown``), commit, and close the file."""
-        for stroke_id in list(self._open):
-            self.end_stroke(stroke_id, "shutdown")
-        self._stop.set()
-        self._checkpointer.join()
-        with self._lock:
-            if self._db is not None:
-                self._db.commit()
-                self._db.close()
-                self._db = None
-
+        """End strokes still open (reason ``shutdown``), commit, checkpoint, and close the file
+        (once; later calls do nothing)."""
+        with self._close_lock:
+            if self._closed:
+                return
+            self._submit(self._end_all, "shutdown")
+            self._closed = True
+        self._queue.put(_STOP)
+        self._writer.join()
+        self._db.close()
+        self._release_lock()
 
     def discard(self) -> None:
         """Close, and remove the file if this store created it and it holds no stroke: for a
         server that fails to start, so that it leaves nothing behind."""
-        empty = self._db is not None and self.count() == (0, 0)
+        empty = not self._closed and self.count() == (0, 0)
         self.close()
         if self.created and empty:
             _remove_store_files(self.path)
@@ -272,8 +530,8 @@ def export_csv(store: str | os.PathLike, output: str | os.PathLike,
     try:
         if output.exists() and output.resolve() == store.resolve():
             raise fail(output, "is the stroke store itself; give another file name for the CSV")
-        if stroke is not None and connection.execute(
-                "SELECT 1 FROM strokes WHERE id = ?", (stroke,)).fetchone() is None:
+        if stroke is not None and (not 0 <= stroke < 2**63 or connection.execute(
+                "SELECT 1 FROM strokes WHERE id = ?", (stroke,)).fetchone() is None):
             raise fail(store, f"no stroke with id {stroke}")
         strokes, rows = set(), 0
         with atomic_path(output) as tmp:

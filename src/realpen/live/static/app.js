@@ -98,6 +98,7 @@ const smoother = new Smoother(audio.sampleRate, 5);
 const ink = new Ink($('ink'));
 const buffers = new Map();
 let lastSentTarget = null;
+let sampleIndex = 0; // samples of the current stroke sent so far
 let penRequest = 0;
 
 Object.defineProperties(state, {
@@ -138,9 +139,12 @@ function apply(samples) {
   }
   const limit = (state.config && state.config.max_samples) || 512;
   for (let i = 0; i < samples.length; i += limit) {
-    link.send({ type: 'samples', stroke: state.stroke,
-      samples: samples.slice(i, i + limit).map(({ t, x, y, pressure, tilt_x, tilt_y, speed }) => (
+    const batch = samples.slice(i, i + limit);
+    // `index` numbers the samples within the stroke: a batch sent again is stored once.
+    link.send({ type: 'samples', stroke: state.stroke, index: sampleIndex,
+      samples: batch.map(({ t, x, y, pressure, tilt_x, tilt_y, speed }) => (
         { t, x, y, pressure, tilt_x, tilt_y, speed })) });
+    sampleIndex += batch.length;
   }
   scheduleStatus();
 }
@@ -160,6 +164,7 @@ function penDown(info, sample) {
   state.down = true;
   state.pointerType = info.pointerType;
   lastSentTarget = null;
+  sampleIndex = 0;
   link.send({ type: 'pen_down', stroke: state.stroke, t: sample.t, pen: state.pen,
     profile_version: state.profileVersion, modality: state.modality, ink: state.ink,
     pointer_type: pick(info.pointerType, POINTER_TYPES, 'unknown'), px_per_mm: state.pxPerMm,

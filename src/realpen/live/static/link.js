@@ -1,20 +1,34 @@
 // The WebSocket to the server: typed messages (see realpen/live/messages.py), numbered by `seq`,
-// each answered by `ack` or `error`. Messages sent while (re)connecting wait in a short queue;
-// the link reconnects with a growing delay if the server goes away.
+// each answered by `ack` or `error`.
+//
+// Nothing is lost: every message is kept until the server acknowledges it. At most WINDOW
+// messages are in flight; the rest wait in order (the server reads one message at a time, so
+// a page that writes faster than the server stores simply waits here). When the socket closes,
+// what was in flight goes back to the front of the queue and is sent again after the reconnect,
+// which names the page (`hello.page`) so the server stores each stroke and sample once. A
+// message the store could not record (`error` with code `store`) is sent again a little later.
 
-const QUEUE_LIMIT = 2000;
+const WINDOW = 64;
 const RTT_KEPT = 256;
+const STORE_RETRY_MS = 1000;
+
+function randomId() {
+  // crypto.getRandomValues works on plain http (a tablet on the LAN); randomUUID does not.
+  const bytes = crypto.getRandomValues(new Uint8Array(16));
+  return Array.from(bytes, (b) => b.toString(16).padStart(2, '0')).join('');
+}
 
 export class Link {
   constructor(url, { client, onChange } = {}) {
     this.url = url;
     this.client = client || 'realpen-page';
     this.onChange = onChange || (() => {});
+    this.page = randomId();
     this.seq = 0;
-    this.queue = [];
-    this.pending = new Map();
-    this.stats = { state: 'connecting', sent: 0, acked: 0, errors: 0, lastError: null,
-      rtt: [], session: null, lastStrokeId: null };
+    this.outbox = [];          // [seq, text] not yet sent on the current socket, in seq order
+    this.inFlight = new Map(); // seq → [text, sentAt] sent and not yet acknowledged
+    this.stats = { state: 'connecting', sent: 0, acked: 0, errors: 0, resent: 0, unacked: 0,
+      lastError: null, rtt: [], session: null, lastStrokeId: null, page: this.page };
     this.retry = 500;
     this.connect();
   }
@@ -26,49 +40,63 @@ export class Link {
     ws.onopen = () => {
       this.stats.state = 'open';
       this.retry = 500;
-      this.transmit({ type: 'hello', seq: this.seq++, client: this.client, protocol: 1 });
-      for (const text of this.queue.splice(0)) this.raw(text);
+      const hello = { type: 'hello', seq: this.seq++, client: this.client, protocol: 1,
+        page: this.page };
+      this.hellos = new Set([hello.seq]);
+      this.transmit(hello.seq, JSON.stringify(hello));
+      this.pump();
       this.onChange(this.stats);
     };
     ws.onmessage = (event) => this.reply(event.data);
     ws.onclose = () => {
       if (this.ws !== ws) return;
       this.stats.state = 'closed';
-      this.pending.clear();
+      // What the server may not have stored goes out again, first and in order.
+      const unsure = [...this.inFlight.entries()]
+        .filter(([seq]) => !this.hellos.has(seq))
+        .map(([seq, [text]]) => [seq, text]);
+      this.stats.resent += unsure.length;
+      this.outbox = [...unsure, ...this.outbox].sort((a, b) => a[0] - b[0]);
+      this.inFlight.clear();
+      this.updateUnacked();
       this.onChange(this.stats);
       setTimeout(() => this.connect(), this.retry);
       this.retry = Math.min(this.retry * 2, 10000);
     };
   }
 
-  /** Send a message (its `seq` is added); returns the seq. */
+  /** Send a message (its `seq` is added); returns the seq. It is kept until acknowledged. */
   send(message) {
     const seq = this.seq++;
-    const text = JSON.stringify({ ...message, seq });
-    if (this.ws.readyState === WebSocket.OPEN) this.raw(text, seq);
-    else if (this.queue.length < QUEUE_LIMIT) this.queue.push(text);
+    this.outbox.push([seq, JSON.stringify({ ...message, seq })]);
+    this.pump();
+    this.updateUnacked();
     return seq;
   }
 
-  transmit(message) {
-    this.raw(JSON.stringify(message), message.seq);
+  pump() {
+    if (!this.ws || this.ws.readyState !== WebSocket.OPEN) return;
+    while (this.outbox.length && this.inFlight.size < WINDOW) {
+      const [seq, text] = this.outbox.shift();
+      this.transmit(seq, text);
+    }
   }
 
-  raw(text, seq) {
+  transmit(seq, text) {
     this.ws.send(text);
     this.stats.sent += 1;
-    this.pending.set(seq ?? JSON.parse(text).seq, performance.now());
+    this.inFlight.set(seq, [text, performance.now()]);
   }
 
   reply(data) {
     let message;
     try { message = JSON.parse(data); } catch { return; }
-    const sentAt = this.pending.get(message.seq);
-    this.pending.delete(message.seq);
+    const entry = this.inFlight.get(message.seq);
+    this.inFlight.delete(message.seq);
     if (message.type === 'ack') {
       this.stats.acked += 1;
-      if (sentAt !== undefined) {
-        this.stats.rtt.push(performance.now() - sentAt);
+      if (entry !== undefined) {
+        this.stats.rtt.push(performance.now() - entry[1]);
         if (this.stats.rtt.length > RTT_KEPT) this.stats.rtt.shift();
       }
       if (message.session) this.stats.session = message.session;
@@ -77,8 +105,22 @@ export class Link {
       this.stats.errors += 1;
       this.stats.lastError = message;
       console.warn(`realpen server: ${message.code}: ${message.message}`);
+      if (message.code === 'store' && entry !== undefined) {
+        const again = [message.seq, entry[0]];
+        setTimeout(() => {
+          this.outbox.unshift(again);
+          this.outbox.sort((a, b) => a[0] - b[0]);
+          this.pump();
+        }, STORE_RETRY_MS);
+      }
     }
+    this.pump();
+    this.updateUnacked();
     this.onChange(this.stats);
+  }
+
+  updateUnacked() {
+    this.stats.unacked = this.outbox.length + this.inFlight.size;
   }
 
   /** Median round trip of the recent acknowledged messages, in ms. */

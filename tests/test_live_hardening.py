@@ -1,0 +1,372 @@
+"""The live server under a careless user and a hostile web page: nothing lost, nothing stored
+twice, strokes closed after a crash, one server per store, security headers, other sites
+refused, a paged device log, and timeouts for slow clients."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import signal
+import socket
+import sqlite3
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+from conftest import run_cli
+
+pytest.importorskip("fastapi", reason="the live app needs the server dependencies")
+
+import uvicorn  # noqa: E402
+from fastapi.testclient import TestClient  # noqa: E402
+from websockets.sync.client import connect  # noqa: E402
+
+from realpen.errors import RealPenError  # noqa: E402
+from realpen.live.app import DEVICE_LOG_PAGE, LiveSettings, create_app  # noqa: E402
+from realpen.live.auth import CONTENT_SECURITY_POLICY  # noqa: E402
+from realpen.live.device import Origin, SimulatedDevice  # noqa: E402
+from realpen.live.server import bind, server_config  # noqa: E402
+from realpen.live.store import StrokeStore  # noqa: E402
+from realpen.profile import resolve_profile  # noqa: E402
+
+LOCAL = "http://127.0.0.1"
+WS = "ws://127.0.0.1/ws"
+PAGE = "page-0123456789abcdef"
+STROKE_FIELDS = dict(pen="pencil", profile_version="0" * 12, modality="none", ink="visible",
+                     pointer_type="pen", px_per_mm=4.0, calibrated=False)
+
+
+@pytest.fixture
+def store_path(tmp_path):
+    return tmp_path / "strokes.sqlite3"
+
+
+@pytest.fixture
+def client(tmp_path, store_path, monkeypatch):
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    app = create_app(LiveSettings.loopback(store=store_path))
+    with TestClient(app, base_url=LOCAL) as test_client:
+        yield test_client
+
+
+def talk(ws, message) -> dict:
+    ws.send_text(json.dumps(message))
+    return json.loads(ws.receive_text())
+
+
+def rows(path, sql, *args):
+    with sqlite3.connect(path) as db:
+        return db.execute(sql, args).fetchall()
+
+
+def batch(first: int, n: int = 4) -> list[dict]:
+    """``n`` samples whose ``x`` is their number within the stroke (a duplicate shows)."""
+    return [{"t": 10.0 + (first + k) / 100, "x": float(first + k), "y": 1.0, "pressure": 0.5,
+             "speed": 20.0} for k in range(n)]
+
+
+def pen_down(seq: int, stroke: int = 1) -> dict:
+    return {"type": "pen_down", "seq": seq, "stroke": stroke, "t": 10.0, "pen": "pencil",
+            "profile_version": resolve_profile("pencil").version, "modality": "tactile",
+            "px_per_mm": 4.0}
+
+
+# ---- nothing lost, nothing stored twice ----------------------------------------------------
+
+def test_a_page_that_reconnects_and_resends_stores_every_sample_once(client, store_path):
+    hello = {"type": "hello", "seq": 0, "client": "t", "page": PAGE}
+    with client.websocket_connect(WS) as ws:
+        assert talk(ws, hello)["type"] == "ack"
+        stroke_id = talk(ws, pen_down(1))["stroke_id"]
+        for seq, first in ((2, 0), (3, 4)):
+            assert talk(ws, {"type": "samples", "seq": seq, "stroke": 1, "index": first,
+                             "samples": batch(first)})["type"] == "ack"
+    # The connection dropped mid-stroke: the server had to end it.
+    assert rows(store_path, "SELECT end_reason FROM strokes") == [("disconnect",)]
+    with client.websocket_connect(WS) as ws:  # the page is back and resends what it was unsure of
+        assert talk(ws, {**hello, "seq": 7})["type"] == "ack"
+        assert talk(ws, pen_down(1))["stroke_id"] == stroke_id
+        for seq, first in ((3, 4), (4, 8), (4, 8)):
+            reply = talk(ws, {"type": "samples", "seq": seq, "stroke": 1, "index": first,
+                              "samples": batch(first)})
+            assert reply["type"] == "ack", reply
+        assert talk(ws, {"type": "pen_up", "seq": 5, "stroke": 1, "t": 11.0})["type"] == "ack"
+    assert rows(store_path, "SELECT id, page, sample_count, end_reason FROM strokes") == \
+        [(stroke_id, PAGE, 12, "pen_up")]
+    assert [x for (x,) in rows(store_path, "SELECT x FROM samples ORDER BY seq")] == \
+        [float(k) for k in range(12)]
+    assert client.get("/api/status").json()["samples"] == 12
+
+
+def test_samples_and_pen_up_resent_for_a_stroke_the_server_ended_are_taken(client, store_path):
+    hello = {"type": "hello", "seq": 0, "client": "t", "page": PAGE}
+    with client.websocket_connect(WS) as ws:
+        talk(ws, hello)
+        talk(ws, pen_down(1))
+    with client.websocket_connect(WS) as ws:  # pen_down was acknowledged: not resent
+        talk(ws, hello)
+        assert talk(ws, {"type": "samples", "seq": 2, "stroke": 1, "index": 0,
+                         "samples": batch(0)})["type"] == "ack"
+        assert talk(ws, {"type": "gain", "seq": 3, "stroke": 1, "t": 10.1,
+                         "target": 0.5})["type"] == "ack"
+        assert talk(ws, {"type": "pen_up", "seq": 4, "stroke": 1, "t": 11.0})["type"] == "ack"
+        # Another page's stroke, or one never drawn, is not this page's to write to.
+        reply = talk(ws, {"type": "samples", "seq": 5, "stroke": 2, "samples": batch(0)})
+        assert reply["code"] == "protocol" and "not down" in reply["message"]
+    assert rows(store_path, "SELECT sample_count, end_reason FROM strokes") == [(4, "pen_up")]
+    with client.websocket_connect(WS) as ws:
+        talk(ws, {**hello, "page": "another-page-000"})
+        reply = talk(ws, {"type": "pen_up", "seq": 1, "stroke": 1, "t": 11.0})
+        assert reply["code"] == "protocol"
+
+
+def test_store_numbers_samples_and_ignores_a_number_it_has(tmp_path):
+    store = StrokeStore(tmp_path / "s.sqlite3")
+    sid = store.begin_stroke(session="s", page_stroke=1, page_t0=1.0, **STROKE_FIELDS)
+    assert store.begin_stroke(session="other", page="s", page_stroke=1, page_t0=9.0,
+                              **STROKE_FIELDS) == sid  # same page, same stroke
+    rows_ = [(1.0 + k / 10, k, 0, 0.5, 0, 0, 0) for k in range(5)]
+    assert store.add_samples(sid, rows_[:3], first=0) == 3
+    assert store.add_samples(sid, rows_[1:5], first=1) == 5  # 1 and 2 again: ignored
+    assert store.add_samples(sid, rows_[:1]) == 6  # unnumbered: after the last
+    store.close()
+    assert rows(tmp_path / "s.sqlite3", "SELECT seq, x FROM samples ORDER BY seq") == \
+        [(0, 0.0), (1, 1.0), (2, 2.0), (3, 3.0), (4, 4.0), (5, 0.0)]
+
+
+# ---- the store: crashes, a second server, damage, the journal, old stores ------------------
+
+CRASHER = """
+import os, sys
+from realpen.live.store import StrokeStore
+store = StrokeStore(sys.argv[1])
+sid = store.begin_stroke(session="s", page_stroke=1, pen="pencil", profile_version="0" * 12,
+                         modality="none", ink="visible", pointer_type="pen", px_per_mm=4.0,
+                         calibrated=False, page_t0=2.0)
+store.add_samples(sid, [(2.0, 0, 0, 0.5, 0, 0, 0), (3.5, 1, 0, 0.5, 0, 0, 0)])
+print("ready", flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_killed_server_leaves_its_store_to_the_next_which_closes_its_strokes(tmp_path):
+    path = tmp_path / "s.sqlite3"
+    process = subprocess.Popen([sys.executable, "-c", CRASHER, str(path)], text=True,
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    try:
+        assert process.stdout.readline().strip() == "ready"
+        with pytest.raises(RealPenError, match="in use by another RealPen server") as caught:
+            StrokeStore(path)
+        assert str(caught.value).startswith(f"{path}: ") and "\n" not in str(caught.value)
+    finally:
+        process.send_signal(signal.SIGKILL)
+        process.wait(timeout=10)
+    assert rows(path, "SELECT end_reason FROM strokes") == [(None,)]  # open, as the kill left it
+    store = StrokeStore(path)
+    assert store.recovered == 1 and store.count() == (1, 2)
+    store.close()
+    ((started, ended, reason),) = rows(path, "SELECT started_at, ended_at, end_reason FROM strokes")
+    assert reason == "crash"
+    from datetime import datetime
+    lasted = datetime.fromisoformat(ended) - datetime.fromisoformat(started)
+    assert lasted.total_seconds() == pytest.approx(1.5)  # its last sample, 1.5 s after pen down
+
+
+def test_a_damaged_store_is_refused_in_one_line(tmp_path):
+    path = tmp_path / "s.sqlite3"
+    store = StrokeStore(path)
+    sid = store.begin_stroke(session="s", page_stroke=1, page_t0=0.0, **STROKE_FIELDS)
+    store.add_samples(sid, [(k / 100, k, 0, 0.5, 0, 0, 0) for k in range(3000)])
+    store.close()
+    data = bytearray(path.read_bytes())
+    assert len(data) > 8 * 4096
+    data[3 * 4096:6 * 4096] = b"\x5a" * (3 * 4096)  # pages of the samples' b-tree
+    path.write_bytes(bytes(data))
+    with pytest.raises(RealPenError, match="damaged") as caught:
+        StrokeStore(path)
+    assert str(caught.value).startswith(f"{path}: ") and "\n" not in str(caught.value)
+    result = run_cli("serve", "--port", "0", "--store", str(path))
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.strip().count("\n") == 0 and str(path) in result.stderr
+    assert "RealPen live" not in result.stdout  # refused before any URL is printed
+
+
+def test_the_journal_is_checkpointed_and_truncated_while_pages_write(tmp_path):
+    path = tmp_path / "s.sqlite3"
+    store = StrokeStore(path, checkpoint_s=60.0, wal_checkpoint_bytes=256 * 1024)
+    sid = store.begin_stroke(session="s", page_stroke=1, page_t0=0.0, **STROKE_FIELDS)
+    wal = []
+    for k in range(400):  # ~400 commits of ~10 KB of journal each: ~4 MB unchecked
+        store.add_samples(sid, [(k + j / 10, j, 0, 0.5, 0, 0, 0) for j in range(10)])
+        wal.append(os.stat(f"{path}-wal").st_size)
+    assert store.count() == (1, 4000)
+    assert max(wal) < 1024 * 1024, max(wal)
+    assert min(wal[200:]) < 64 * 1024  # truncated again and again, not only at close
+    store.close()
+
+
+def test_a_version_1_store_is_upgraded_in_place(tmp_path):
+    path = tmp_path / "old.sqlite3"
+    with sqlite3.connect(path) as db:
+        db.executescript("""
+            CREATE TABLE strokes (id INTEGER PRIMARY KEY AUTOINCREMENT, session TEXT NOT NULL,
+              page_stroke INTEGER NOT NULL, pen TEXT NOT NULL, profile_version TEXT NOT NULL,
+              modality TEXT NOT NULL, ink TEXT NOT NULL, pointer_type TEXT NOT NULL,
+              px_per_mm REAL NOT NULL, calibrated INTEGER NOT NULL, page_t0 REAL NOT NULL,
+              started_at TEXT NOT NULL, ended_at TEXT, end_reason TEXT,
+              sample_count INTEGER NOT NULL DEFAULT 0);
+            CREATE TABLE samples (stroke_id INTEGER NOT NULL REFERENCES strokes(id),
+              seq INTEGER NOT NULL, t REAL NOT NULL, x REAL NOT NULL, y REAL NOT NULL,
+              pressure REAL NOT NULL, tilt_x REAL NOT NULL, tilt_y REAL NOT NULL,
+              speed REAL NOT NULL, PRIMARY KEY (stroke_id, seq)) WITHOUT ROWID;
+            INSERT INTO strokes VALUES (1, 'abc', 1, 'pencil', '000000000000', 'none', 'visible',
+              'pen', 4.0, 0, 0.0, '2026-01-01T00:00:00.000+00:00', '2026-01-01T00:00:01.000+00:00',
+              'pen_up', 0);
+            PRAGMA user_version = 1;
+        """)
+    store = StrokeStore(path)
+    assert store.begin_stroke(session="abc", page_stroke=1, page_t0=0.0, **STROKE_FIELDS) == 1
+    store.close()
+    assert rows(path, "SELECT page, end_reason FROM strokes") == [("abc", "pen_up")]
+    assert rows(path, "PRAGMA user_version") == [(2,)]
+
+
+# ---- the web side ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("path, status", [
+    ("/", 200), ("/static/app.js", 200), ("/static/style.css", 200), ("/api/config", 200),
+    ("/api/profiles", 200), ("/api/profiles/pencil/sound.wav", 200), ("/api/status", 200),
+    ("/api/device/log", 200), ("/nowhere", 404), ("/api/profiles/nobody/sound.wav", 404),
+])
+def test_every_response_carries_the_security_headers(client, path, status):
+    response = client.get(path)
+    assert response.status_code == status
+    headers = response.headers
+    assert headers["content-security-policy"] == CONTENT_SECURITY_POLICY
+    assert "frame-ancestors 'none'" in CONTENT_SECURITY_POLICY
+    assert "script-src 'self';" in CONTENT_SECURITY_POLICY and "unsafe" not in \
+        CONTENT_SECURITY_POLICY
+    assert headers["x-frame-options"] == "DENY"
+    assert headers["x-content-type-options"] == "nosniff"
+    assert headers["referrer-policy"] == "no-referrer"
+
+
+def test_refusals_carry_the_headers_too(tmp_path, monkeypatch):
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    app = create_app(LiveSettings(store=tmp_path / "s.sqlite3", token="secret-token"))
+    with TestClient(app, base_url=LOCAL) as lan:
+        refused = lan.get("/api/config")
+        assert refused.status_code == 401
+        assert refused.headers["x-frame-options"] == "DENY"
+        assert refused.headers["content-security-policy"] == CONTENT_SECURITY_POLICY
+
+
+@pytest.mark.parametrize("headers, path, allowed", [
+    ({}, "/api/status", True),  # not a browser (curl, scripts)
+    ({"sec-fetch-site": "same-origin"}, "/api/status", True),
+    ({"sec-fetch-site": "none"}, "/", True),  # typed or bookmarked
+    ({"sec-fetch-site": "cross-site"}, "/api/status", False),
+    ({"sec-fetch-site": "same-site"}, "/api/profiles", False),  # another port of this machine
+    ({"sec-fetch-site": "cross-site", "sec-fetch-mode": "no-cors",
+      "sec-fetch-dest": "script"}, "/static/app.js", False),
+    ({"sec-fetch-site": "cross-site", "sec-fetch-mode": "cors"},
+     "/api/profiles/pencil/sound.wav", False),
+    ({"sec-fetch-site": "cross-site", "sec-fetch-mode": "navigate",
+      "sec-fetch-dest": "document"}, "/", True),  # following a link to the page
+    ({"sec-fetch-site": "cross-site", "sec-fetch-mode": "navigate",
+      "sec-fetch-dest": "iframe"}, "/", False),
+    ({"sec-fetch-site": "cross-site", "sec-fetch-mode": "navigate",
+      "sec-fetch-dest": "document"}, "/api/device/log", False),
+    ({"origin": "http://evil.example"}, "/api/status", False),
+    ({"origin": "http://127.0.0.1"}, "/api/status", True),
+])
+def test_other_sites_are_refused(client, headers, path, allowed):
+    response = client.get(path, headers=headers)
+    assert (response.status_code == 200) == allowed, (response.status_code, response.text)
+    if not allowed:
+        assert response.status_code == 403 and "other sites" in response.text
+
+
+def test_the_device_log_comes_in_pages(tmp_path, monkeypatch):
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    device = SimulatedDevice()
+    for k in range(2 * DEVICE_LOG_PAGE + 500):
+        device.gain(Origin("s", 1, k), 0.5)
+    app = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3", device=device))
+    with TestClient(app, base_url=LOCAL) as client:
+        seen, since, pages = [], 0, 0
+        while True:
+            page = client.get("/api/device/log", params={"since": since}).json()
+            assert len(page["entries"]) <= DEVICE_LOG_PAGE
+            seen += [entry["seq"] for entry in page["entries"]]
+            pages += 1
+            if page["next"] >= page["count"]:
+                break
+            since = page["next"]
+        assert seen == list(range(2 * DEVICE_LOG_PAGE + 500)) and pages == 3
+        too_many = client.get("/api/device/log", params={"limit": 100_000})
+        assert too_many.status_code == 422
+
+
+# ---- a real uvicorn: slow clients and bad frames ---------------------------------------------
+
+@pytest.fixture
+def uvicorn_server(tmp_path, monkeypatch):
+    """The live app under uvicorn with the server's own configuration, head timeout 0.5 s."""
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    app = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3"))
+    sock = bind("127.0.0.1", 0)
+    server = uvicorn.Server(server_config(app, head_timeout_s=0.5))
+    thread = threading.Thread(target=lambda: asyncio.run(server.serve(sockets=[sock])))
+    thread.start()
+    deadline = time.monotonic() + 20
+    while not server.started and time.monotonic() < deadline:
+        time.sleep(0.02)
+    try:
+        yield sock.getsockname()[1]
+    finally:
+        server.should_exit = True
+        thread.join(timeout=20)
+        sock.close()
+
+
+def closed_within(connection: socket.socket, seconds: float) -> bool:
+    connection.settimeout(seconds)
+    try:
+        return connection.recv(1024) == b""
+    except TimeoutError:
+        return False
+
+
+def test_slow_and_silent_clients_are_timed_out(uvicorn_server):
+    port = uvicorn_server
+    with socket.create_connection(("127.0.0.1", port)) as silent, \
+            socket.create_connection(("127.0.0.1", port)) as half:
+        half.sendall(b"GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: ")
+        assert closed_within(silent, 5.0) and closed_within(half, 5.0)
+    with socket.create_connection(("127.0.0.1", port)) as polite:  # a whole request is answered
+        polite.sendall(b"GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        polite.settimeout(5.0)
+        assert polite.recv(1024).startswith(b"HTTP/1.1 200")
+
+
+def test_a_frame_that_is_not_utf8_is_logged_in_one_line(uvicorn_server, caplog):
+    port = uvicorn_server
+    caplog.set_level(logging.WARNING, logger="uvicorn.error")
+    with connect(f"ws://127.0.0.1:{port}/ws") as ws:
+        ws.send(b"\xff\xfe not text", text=True)
+        with pytest.raises(Exception):  # noqa: B017 - the server closes the connection (1007)
+            ws.recv(timeout=5)
+    deadline = time.monotonic() + 5
+    while not any("UTF-8" in r.getMessage() for r in caplog.records) and \
+            time.monotonic() < deadline:
+        time.sleep(0.05)
+    (record,) = [r for r in caplog.records if "UTF-8" in r.getMessage()]
+    assert "\n" not in record.getMessage() and record.exc_info is None
+    with connect(f"ws://127.0.0.1:{port}/ws") as ws:  # the server is fine
+        ws.send(json.dumps({"type": "hello", "seq": 0, "client": "after"}))
+        assert json.loads(ws.recv(timeout=5))["type"] == "ack"
