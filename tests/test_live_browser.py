@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import socket
 import sqlite3
 import time
 from pathlib import Path
@@ -127,7 +128,7 @@ class Page:
 
     def settle(self) -> None:
         self.page.wait_for_function("() => !window.realpen.down && "
-                                    "window.realpen.link.acked === window.realpen.link.sent")
+                                    "window.realpen.link.unacked === 0")
 
     def trace(self, stroke: int | None = None) -> list[dict]:
         entries = self.eval("window.realpen.trace")
@@ -173,8 +174,13 @@ def loops(x0: float, y0: float, n: int = 190, size: float = 24):
 
 
 def session_log(server, session: str) -> list[dict]:
-    entries = httpx.get(server.base + "api/device/log").json()["entries"]
-    return [e for e in entries if e["session"] == session]
+    entries, since = [], 0
+    while True:  # the log comes a page at a time
+        page = httpx.get(server.base + "api/device/log", params={"since": since}).json()
+        entries += page["entries"]
+        if page["next"] >= page["count"]:
+            return [e for e in entries if e["session"] == session]
+        since = page["next"]
 
 
 def store_rows(server, sql: str, *args):
@@ -421,6 +427,39 @@ def test_lan_mode_page_works_with_its_token_only(browser, tmp_path):
             assert page.problems == []
         finally:
             page.close()
+
+
+def test_a_stroke_drawn_across_a_server_crash_is_stored_whole_and_once(browser, tmp_path):
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = str(probe.getsockname()[1])
+    store = tmp_path / "strokes.sqlite3"
+    points = writing(80)
+    with serve(tmp_path, "--port", port) as first:
+        first.store = store
+        page = Page(browser, first)
+        try:
+            page.stroke(points[:40], lift=False)
+            page.page.wait_for_function("() => window.realpen.link.unacked === 0")
+            first.process.kill()  # SIGKILL mid-stroke: nothing is closed cleanly
+            first.process.wait(timeout=10)
+            t0 = time.time()
+            for i, (x, y, p) in enumerate(points[40:]):  # the pen goes on while the server is away
+                page.pen("mouseMoved", x, y, p, t0 + i * 0.008)
+            page.pen("mouseReleased", *points[-1][:2], 0.0, t0 + 0.5)
+            page.page.wait_for_function("() => window.realpen.link.state === 'closed' && "
+                                        "window.realpen.link.unacked > 0")
+            with serve(tmp_path, "--port", port) as second:  # same port, same store
+                second.store = store
+                page.page.wait_for_function("() => window.realpen.link.state === 'open' && "
+                                            "window.realpen.link.unacked === 0", timeout=30_000)
+        finally:
+            page.close()
+    ((count, reason),) = store_rows(first, "SELECT sample_count, end_reason FROM strokes")
+    assert reason == "pen_up"  # the resent pen-up replaced the 'crash' found at restart
+    xs = [x for (x,) in store_rows(first, "SELECT x FROM samples ORDER BY seq")]
+    assert count == len(xs) == len(set(xs)) and count >= 80  # every sample, each once
+    assert xs == sorted(xs)  # in drawing order (the stroke goes left to right)
 
 
 # ---- pens whose audio is unusual or broken ----------------------------------------------------
