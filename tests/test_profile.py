@@ -87,6 +87,10 @@ def break_bundle(folder: Path, case: str) -> str:
     if case == "nan_phase":
         document["tactile"]["subpatterns"][0][0]["phase"] = float("nan")
         (folder / "profile.json").write_text(json.dumps(document))
+        return "NaN is not a number"
+    if case == "overflowing_phase":  # 1e999 is valid JSON that Python reads as inf
+        document["tactile"]["subpatterns"][0][0]["phase"] = "OVERFLOW"
+        (folder / "profile.json").write_text(json.dumps(document).replace('"OVERFLOW"', "1e999"))
         return "phase"
     if case == "empty_subpattern":
         document["tactile"]["subpatterns"][1] = []
@@ -127,8 +131,8 @@ def break_bundle(folder: Path, case: str) -> str:
 
 
 CASES = ["missing_wav", "unknown_format", "schema", "not_json", "other_wav", "wrong_rate",
-         "nan_phase", "empty_subpattern", "lengths_disagree", "format_true", "bad_actuator",
-         "bad_coupling"]
+         "nan_phase", "overflowing_phase", "empty_subpattern", "lengths_disagree", "format_true",
+         "bad_actuator", "bad_coupling"]
 
 
 @pytest.mark.parametrize("case", CASES)

@@ -6,6 +6,7 @@ matplotlib) is imported inside the commands, so ``realpen --help`` stays fast.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import typer
@@ -94,15 +95,21 @@ def build(
 def list_command(
     profiles: list[Path] = typer.Option([], "--profiles", help="Another folder of profiles."),
 ) -> None:
-    """List the bundled and the user's profiles, one line each."""
+    """List the bundled and the user's profiles, one line each.
+
+    A bundle that does not load is left out and named in one warning line on stderr,
+    ``realpen: warning: skipped profile <bundle>: <problem>``; the others are listed.
+    """
     from realpen.profile import list_profiles, load_profile
 
     found = list_profiles(profiles)
     for where, path in found:
         try:
             profile = load_profile(path)
-        except RealPenError as error:  # a broken bundle is listed, not fatal
-            console.print(f"{path.name} ({where}): unreadable: {error}")
+        except RealPenError as error:  # a broken bundle is named, not fatal
+            # print, not rich: rich wraps long lines, and the warning must stay one line.
+            print(f"realpen: warning: skipped profile {' '.join(str(error).split())}",
+                  file=sys.stderr, flush=True)
             continue
         console.print(f"{profile.summary()} ({where}, version {profile.version})")
     if not found:

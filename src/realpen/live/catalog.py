@@ -15,6 +15,7 @@ from realpen.io.files import wav_bytes
 from realpen.pens import BUNDLED_PENS
 from realpen.profile.bundle import PenProfile, load_profile
 from realpen.profile.registry import list_profiles
+from realpen.profile.schema import MAX_WAV_FRAMES
 
 __all__ = ["MIN_WAV_RATE", "playable_rate", "playable_wav", "CatalogEntry", "Catalog"]
 
@@ -85,6 +86,26 @@ class CatalogEntry:
         return playable_wav(self.profile.tactile, self.profile.meta.tactile.rate,
                             self.profile.meta.sound.rate, f"{self.profile.name} tactile pattern")
 
+    def check(self) -> None:
+        """Refuse a profile whose loops would be too long to serve.
+
+        Below 3 kHz a loop is served resampled, up to 4,000 times as many frames (100 Hz to
+        400 kHz): the served WAV may hold at most
+        :data:`~realpen.profile.schema.MAX_WAV_FRAMES` frames, like a bundle's own.
+
+        Raises:
+            RealPenError: naming the bundle and the loop.
+        """
+        meta = self.profile.meta
+        for what, frames, rate, served in (
+                ("tactile pattern", meta.tactile.frames, meta.tactile.rate, self.tactile_rate),
+                ("sound unit", meta.sound.frames, meta.sound.rate, self.sound_rate)):
+            length = frames * served // rate
+            if length > MAX_WAV_FRAMES:
+                raise fail(self.profile.path or self.profile.name,
+                           f"its {what} would be {length:,} frames served at {served} Hz; "
+                           f"the limit is {MAX_WAV_FRAMES:,}")
+
     def to_json(self) -> dict:
         """The entry as the page reads it (``GET /api/profiles``): the pen, its version and
         coupling, and where to fetch its sound and tactile loops; ``tactile`` describes the
@@ -110,8 +131,11 @@ class Catalog:
     """Profiles by name: bundled pens first (pencil, ballpoint, marker), then the others.
 
     A name found twice keeps its first profile. A user or extra profile that does not load is
-    skipped and listed in :attr:`skipped` (``realpen serve`` prints the list once, on stdout,
-    in its startup summary), so one bad bundle does not stop the app.
+    skipped and listed in :attr:`skipped`, one line per bundle naming it and the problem
+    (``realpen serve`` prints the list once, on stdout, in its startup summary), so one bad
+    bundle does not stop the app. Loading a bundle raises nothing but
+    :class:`~realpen.errors.RealPenError` whatever its bytes, within bounded memory
+    (:func:`~realpen.profile.bundle.load_profile`).
     """
 
     def __init__(self, extra: list[Path] | None = None):
@@ -122,13 +146,14 @@ class Catalog:
         self.skipped: list[str] = []
         for where, path in list_profiles([Path(p) for p in extra or []]):
             try:
-                profile = load_profile(path)
+                entry = CatalogEntry(load_profile(path), where)
+                entry.check()
             except RealPenError as error:
                 if where == "bundled":
                     raise
-                self.skipped.append(str(error))
+                self.skipped.append(" ".join(str(error).split()))  # one line, always
                 continue
-            self.entries.setdefault(profile.name, CatalogEntry(profile, where))
+            self.entries.setdefault(entry.profile.name, entry)
         order = {name: i for i, name in enumerate(BUNDLED_PENS)}
         ranked = sorted(self.entries.values(),
                         key=lambda e: (order.get(e.profile.name, len(order)), e.where != "bundled"))

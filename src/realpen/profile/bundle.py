@@ -11,6 +11,16 @@ A bundle is a folder (or the same files in a ``.zip``) holding
 Loading checks that the WAVs are there and are the ones the JSON describes (rate, length,
 SHA-256), so a bundle can be trusted or is refused with one clear line. Bundles of format 1 are
 read too (:func:`realpen.profile.schema.upgrade`).
+
+Whatever its bytes, loading a bundle either succeeds or raises :class:`RealPenError` with one
+line naming the bundle, and never reads more than its limits: ``profile.json`` at most
+:data:`realpen.io.limits.MAX_JSON_BYTES` (read by :func:`realpen.io.limits.load_json`, which
+also bounds nesting and number length), each WAV at most
+:data:`realpen.profile.schema.MAX_WAV_BYTES`; sizes are checked before reading (a folder's
+``stat``, a zip entry's declared size) and the read itself is bounded, so a lying zip header
+cannot inflate more. A ``.zip`` is at most :data:`MAX_ZIP_BYTES` with at most
+:data:`MAX_ZIP_ENTRIES` entries, none encrypted, each stored or deflated. A folder's files must
+be regular files, not symbolic links, FIFOs or devices.
 """
 
 from __future__ import annotations
@@ -20,19 +30,24 @@ import io
 import json
 import os
 import shutil
+import stat
+import struct
 import tempfile
 import zipfile
+import zlib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 from pydantic import ValidationError
 
-from realpen.errors import ParameterError, fail
+from realpen.errors import ParameterError, RealPenError, fail
 from realpen.io.files import atomic_path, current_umask, wav_bytes
+from realpen.io.limits import MAX_JSON_BYTES, load_json
 from realpen.profile.schema import (
     BUNDLE_FILES,
     FORMAT,
+    MAX_WAV_BYTES,
     PROFILE_JSON,
     READABLE_FORMATS,
     SOUND_WAV,
@@ -47,7 +62,26 @@ from realpen.tactile.actuator import Actuator
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.pattern import TactilePattern
 
-__all__ = ["PenProfile", "save_profile", "load_profile", "bundle_wavs"]
+__all__ = ["PenProfile", "save_profile", "load_profile", "bundle_wavs", "MAX_ZIP_ENTRIES",
+           "MAX_ZIP_BYTES", "MAX_FILE_BYTES"]
+
+MAX_FILE_BYTES = {PROFILE_JSON: MAX_JSON_BYTES, TACTILE_WAV: MAX_WAV_BYTES, SOUND_WAV: MAX_WAV_BYTES}
+"""The largest size (bytes) of each file of a bundle, checked before it is read."""
+MAX_ZIP_ENTRIES = 64
+"""The most entries a bundle ``.zip`` may hold. A bundle is three files; folder entries and an
+archiver's leftovers (``__MACOSX/``) fit, while the central directory of a zip of thousands of
+entries is refused before any entry is read."""
+MAX_ZIP_BYTES = sum(MAX_FILE_BYTES.values()) + 1024 * 1024
+"""The largest bundle ``.zip`` read (bytes): its three files stored uncompressed at their limits,
+plus 1 MiB for headers and leftovers (about 21 MiB)."""
+
+# Entries RealPen inflates: what save_profile writes and every archiver's default. Others
+# (bzip2, lzma — whose header may ask for a huge dictionary —, deflate64, …) are refused.
+_ZIP_METHODS = (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED)
+# What zipfile and zlib raise on damaged archives: truncated or inconsistent headers and
+# streams, bad CRCs, sizes that do not fit. Caught only around reading the archive.
+_ZIP_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, ValueError,
+               RuntimeError, NotImplementedError, OverflowError, struct.error, zlib.error)
 
 
 @dataclass
@@ -90,7 +124,7 @@ class PenProfile:
         base = self.meta.tactile
         try:
             params = TactileParams(**self.meta.provenance.tactile_parameters)
-        except (TypeError, ParameterError):
+        except (TypeError, ValueError):  # provenance of another version or shape: not needed
             params = None
         pattern = replace(base, actuator=self.meta.actuator, params=params,
                           notes=tuple(self.meta.provenance.notes))
@@ -116,8 +150,16 @@ class PenProfile:
     def version(self) -> str:
         """Content version: 12 hex digits of the SHA-256 of the canonical form of
         ``profile.json`` (see :func:`realpen.profile.schema.profile_version`); the same pen
-        has the same version on every machine."""
-        return profile_version(self.meta)
+        has the same version on every machine.
+
+        Kept for the ``meta`` object it was computed from (hashing takes milliseconds, and the
+        live server asks on every pen-down); a new ``meta`` is hashed again.
+        """
+        cached = self.__dict__.get("_version")
+        if cached is None or cached[0] is not self.meta:
+            cached = (self.meta, profile_version(self.meta))
+            self.__dict__["_version"] = cached
+        return cached[1]
 
     def summary(self) -> str:
         """One line: name, tool, components, lengths, actuator."""
@@ -143,11 +185,14 @@ class PenProfile:
         if len(self.sound) != sound.frames:
             raise ParameterError("sound", f"{len(self.sound)} samples, but the sound section "
                                           f"says {sound.frames}")
-        files = BundleFiles(
-            tactile=WavFile(file=TACTILE_WAV, rate=pattern.rate, frames=len(self.tactile),
-                            sha256=_sha(wavs[TACTILE_WAV])),
-            sound=WavFile(file=SOUND_WAV, rate=sound.rate, frames=len(self.sound),
-                          sha256=_sha(wavs[SOUND_WAV])))
+        try:
+            files = BundleFiles.model_validate({
+                "tactile": {"file": TACTILE_WAV, "rate": pattern.rate, "frames": len(self.tactile),
+                            "sha256": _sha(wavs[TACTILE_WAV])},
+                "sound": {"file": SOUND_WAV, "rate": sound.rate, "frames": len(self.sound),
+                          "sha256": _sha(wavs[SOUND_WAV])}})
+        except ValidationError as error:  # a WAV loading would refuse: too long, odd rate
+            raise ParameterError("profile", f"files.{_first_error(error)}") from None
         return self.meta.model_copy(update={"files": files})
 
 
@@ -169,16 +214,28 @@ def _sha(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def _read_wav(data: bytes, name: str, source: object) -> tuple[np.ndarray, int]:
+def _read_wav(data: bytes, name: str, source: object, wav: WavFile) -> np.ndarray:
+    """The samples of a bundle WAV, float32, shape (frames,), once its header says it is mono
+    and exactly ``wav.frames`` frames at ``wav.rate`` Hz: a header that claims more frames than
+    the profile needs is refused before anything is decoded."""
     import soundfile as sf
 
+    def refuse(frames: int, rate: int):
+        return fail(source, f"{name} is {frames} frames at {rate} Hz; {PROFILE_JSON} says "
+                            f"{wav.frames} frames at {wav.rate} Hz")
+
     try:
-        samples, rate = sf.read(io.BytesIO(data), dtype="float32", always_2d=True)
-    except (sf.LibsndfileError, RuntimeError, ValueError) as error:
-        raise fail(source, f"{name} is not a readable WAV ({str(error).splitlines()[0]})") from None
-    if samples.shape[1] != 1:
-        raise fail(source, f"{name} has {samples.shape[1]} channels; a profile WAV is mono")
-    return samples[:, 0], rate
+        with sf.SoundFile(io.BytesIO(data)) as handle:
+            if handle.channels != 1:
+                raise fail(source, f"{name} has {handle.channels} channels; a profile WAV is mono")
+            if handle.samplerate != wav.rate or handle.frames != wav.frames:
+                raise refuse(handle.frames, handle.samplerate)
+            samples = handle.read(wav.frames, dtype="float32")
+    except (sf.LibsndfileError, RuntimeError, ValueError, TypeError) as error:
+        raise fail(source, f"{name} is not a readable WAV ({_one_line(error)})") from None
+    if len(samples) != wav.frames:  # the data ended before the header's count
+        raise refuse(len(samples), wav.rate)
+    return samples
 
 
 def save_profile(profile: PenProfile, target: str | os.PathLike) -> Path:
@@ -236,26 +293,123 @@ def save_profile(profile: PenProfile, target: str | os.PathLike) -> Path:
     return target
 
 
-def _read_bundle_files(path: Path) -> dict[str, bytes]:
-    if not path.exists():
-        raise fail(path, "no such profile (folder or .zip)")
-    if path.is_dir():
-        return {name: (path / name).read_bytes() for name in BUNDLE_FILES if (path / name).is_file()}
+def _one_line(text: object, limit: int = 200) -> str:
+    """``text`` on one line (runs of whitespace made one space), cut to ``limit`` characters:
+    messages quote the bundle's own text, which may hold newlines or run to megabytes."""
+    line = " ".join(str(text).split())
+    return line if len(line) <= limit else line[:limit - 1] + "…"
+
+
+def _check_size(bundle: Path, name: str, size: int, what: str = "is") -> None:
+    """Refuse a size in bytes over the limit of the bundle file ``name``, before reading it."""
+    limit = MAX_FILE_BYTES[name]
+    if size > limit:
+        raise fail(bundle, f"{name} {what} {size:,} bytes; the limit is {limit:,}")
+
+
+def _check_read(bundle: Path, name: str, data: bytes, how: str) -> bytes:
+    """Refuse what a bounded read (at most limit + 1 bytes) found to be over the limit."""
+    limit = MAX_FILE_BYTES[name]
+    if len(data) > limit:
+        raise fail(bundle, f"{name} {how} more than its limit of {limit:,} bytes")
+    return data
+
+
+def _open_nonblocking(path: Path, flags: int = 0):
+    """``path`` opened for binary reading without following a last symlink when ``flags`` holds
+    O_NOFOLLOW, and without blocking: opening a FIFO waits for a writer unless O_NONBLOCK."""
+    flags |= os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0)
+    return open(os.open(path, flags), "rb")
+
+
+def _read_folder_file(folder: Path, name: str) -> bytes | None:
+    """The bytes of the bundle folder's ``name`` (None when there is none), refusing symlinks,
+    special files and files over their limit before reading, and reading at most limit + 1."""
+    member = folder / name
     try:
-        with zipfile.ZipFile(path) as archive:
-            members = [n for n in archive.namelist() if Path(n).name in BUNDLE_FILES]
-            names = {Path(n).name: n for n in members}
-            if len(names) != len(members):
-                raise fail(path, "holds more than one profile (repeated profile.json or WAVs)")
-            return {short: archive.read(full) for short, full in names.items()}
-    except (zipfile.BadZipFile, OSError) as error:
-        raise fail(path, f"not a profile folder or a readable .zip ({error})") from None
+        info = os.lstat(member)
+    except FileNotFoundError:
+        return None
+    except OSError as error:
+        raise fail(folder, f"{name}: cannot read ({error.strerror or error})") from None
+    if stat.S_ISLNK(info.st_mode):
+        raise fail(folder, f"{name} is a symbolic link; a bundle holds its files itself")
+    if not stat.S_ISREG(info.st_mode):
+        raise fail(folder, f"{name} is not a regular file")
+    _check_size(folder, name, info.st_size)
+    try:
+        with _open_nonblocking(member, getattr(os, "O_NOFOLLOW", 0)) as handle:
+            # What was opened may not be what lstat saw (replaced meanwhile): check it again.
+            if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+                raise fail(folder, f"{name} is not a regular file")
+            data = handle.read(MAX_FILE_BYTES[name] + 1)
+    except OSError as error:
+        raise fail(folder, f"{name}: cannot read ({error.strerror or error})") from None
+    return _check_read(folder, name, data, "grew, while it was read, to")
+
+
+def _read_zip_entry(path: Path, archive: zipfile.ZipFile, entry: zipfile.ZipInfo,
+                    name: str) -> bytes:
+    if entry.flag_bits & 0x1:
+        raise fail(path, f"{name} is encrypted; a bundle's entries are not")
+    if entry.compress_type not in _ZIP_METHODS:
+        raise fail(path, f"{name} uses zip compression method {entry.compress_type}; "
+                         f"RealPen reads stored or deflated entries")
+    _check_size(path, name, entry.file_size, "is declared")
+    with archive.open(entry) as stream:
+        # Bounded: whatever the headers say, no more than the limit + 1 bytes are inflated.
+        data = stream.read(MAX_FILE_BYTES[name] + 1)
+    return _check_read(path, name, data, "inflates to")
+
+
+def _read_zip(path: Path) -> dict[str, bytes]:
+    try:
+        handle = _open_nonblocking(path)
+    except OSError as error:
+        raise fail(path, f"cannot read ({error.strerror or error})") from None
+    with handle:
+        info = os.fstat(handle.fileno())
+        if not stat.S_ISREG(info.st_mode):
+            raise fail(path, "is not a regular file (a profile is a folder or a .zip)")
+        if info.st_size > MAX_ZIP_BYTES:
+            raise fail(path, f"is {info.st_size:,} bytes; a profile .zip is limited to "
+                             f"{MAX_ZIP_BYTES:,}")
+        try:
+            with zipfile.ZipFile(handle) as archive:
+                entries = archive.infolist()
+                if len(entries) > MAX_ZIP_ENTRIES:
+                    raise fail(path, f"holds {len(entries):,} entries; a profile .zip holds at "
+                                     f"most {MAX_ZIP_ENTRIES}")
+                members = [entry for entry in entries if not entry.is_dir()
+                           and Path(entry.filename).name in BUNDLE_FILES]
+                named = {Path(entry.filename).name: entry for entry in members}
+                if len(named) != len(members):
+                    raise fail(path, "holds more than one profile (repeated profile.json or WAVs)")
+                return {name: _read_zip_entry(path, archive, entry, name)
+                        for name, entry in named.items()}
+        except _ZIP_ERRORS as error:
+            raise fail(path, f"not a profile folder or a readable .zip "
+                             f"({_one_line(error)})") from None
+
+
+def _read_bundle_files(path: Path) -> dict[str, bytes]:
+    try:
+        info = os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        raise fail(path, "no such profile (folder or .zip)") from None
+    except OSError as error:  # e.g. a folder on the way that may not be searched
+        raise fail(path, f"cannot read ({error.strerror or error})") from None
+    if stat.S_ISDIR(info.st_mode):
+        files = {name: _read_folder_file(path, name) for name in BUNDLE_FILES}
+        return {name: data for name, data in files.items() if data is not None}
+    return _read_zip(path)
 
 
 def _first_error(error: ValidationError) -> str:
     first = error.errors()[0]
-    where = ".".join(str(part) for part in first["loc"])
-    message = first["msg"].removeprefix("Value error, ")
+    # The location can hold the document's own keys (an unknown field): keep them short.
+    where = ".".join(_one_line(part, 40) for part in first["loc"])
+    message = _one_line(first["msg"].removeprefix("Value error, "))
     return f"{where}: {message}" if where else message
 
 
@@ -272,30 +426,44 @@ def load_profile(path: str | os.PathLike) -> PenProfile:
         TactilePattern(15 sub-patterns × 100 ms, 10 components each, 8000 Hz)
 
     Raises:
-        RealPenError: a missing file, an unknown format version, a schema violation, or WAVs
-            that do not match the JSON — each as one line naming the bundle.
+        RealPenError: a missing file, an unknown format version, a schema violation, WAVs
+            that do not match the JSON, a file over its limit, a damaged, encrypted or
+            oversized zip — each as one line naming the bundle (no other exception, whatever
+            the bundle's bytes).
     """
     text = os.fspath(path)
     path = Path(path)
-    if not path.exists() and os.sep not in text and (os.altsep or os.sep) not in text \
+    try:
+        exists = path.exists()
+    except OSError:  # something is there that cannot be looked at: the reader names it
+        exists = True
+    if not exists and os.sep not in text and (os.altsep or os.sep) not in text \
             and path.suffix.lower() != ".zip":
         from realpen.profile.registry import resolve_profile
 
         return resolve_profile(text)
+    try:
+        return _load_bundle(path)
+    except RealPenError as error:
+        # One line even when the bundle's own name holds a newline.
+        if len(str(error).splitlines()) > 1:
+            raise RealPenError(" ".join(str(error).split())) from None
+        raise
+
+
+def _load_bundle(path: Path) -> PenProfile:
     files = _read_bundle_files(path)
     missing = [name for name in BUNDLE_FILES if name not in files]
     if missing:
         raise fail(path, f"incomplete profile: missing {', '.join(missing)}")
-    try:
-        document = json.loads(files[PROFILE_JSON].decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise fail(path, f"{PROFILE_JSON} is not valid JSON ({error})") from None
+    # Bounded in size, nesting depth and digits per number; NaN/Infinity refused.
+    document = load_json(files[PROFILE_JSON], what=f"{path}: {PROFILE_JSON}")
     if not isinstance(document, dict):
         raise fail(path, f"{PROFILE_JSON} must hold a JSON object")
     if type(document.get("format")) is not int or document["format"] not in READABLE_FORMATS:
-        raise fail(path, f"unknown profile format {document.get('format')!r} (this RealPen "
-                         f"reads formats {', '.join(map(str, READABLE_FORMATS))}; it writes "
-                         f"{FORMAT})")
+        raise fail(path, f"unknown profile format {_one_line(repr(document.get('format')), 40)} "
+                         f"(this RealPen reads formats {', '.join(map(str, READABLE_FORMATS))}; "
+                         f"it writes {FORMAT})")
     try:
         meta = ProfileMeta.model_validate(upgrade(document))
     except ValidationError as error:
@@ -305,10 +473,7 @@ def load_profile(path: str | os.PathLike) -> PenProfile:
         data = files[name]
         if _sha(data) != wav.sha256:
             raise fail(path, f"{name} does not match {PROFILE_JSON} (SHA-256 differs)")
-        samples, rate = _read_wav(data, name, path)
-        if rate != wav.rate or len(samples) != wav.frames:
-            raise fail(path, f"{name} is {len(samples)} frames at {rate} Hz; {PROFILE_JSON} says "
-                             f"{wav.frames} frames at {wav.rate} Hz")
+        samples = _read_wav(data, name, path, wav)
         if not np.all(np.isfinite(samples)):
             raise fail(path, f"{name} holds NaN or infinite samples")
         arrays[name] = samples

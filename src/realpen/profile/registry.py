@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from realpen.errors import RealPenError
+from realpen.errors import RealPenError, fail
 from realpen.profile.bundle import PenProfile, load_profile
 from realpen.profile.schema import PROFILE_JSON
 
@@ -32,15 +32,31 @@ def profile_locations(extra: list[Path] | None = None) -> list[tuple[str, Path]]
 def list_profiles(extra: list[Path] | None = None) -> list[tuple[str, Path]]:
     """Every profile found: (where, bundle path), bundled first; later names do not hide earlier.
 
-    A bundle is a sub-folder holding ``profile.json`` or a ``.zip`` file.
+    A bundle is a sub-folder holding ``profile.json`` or a ``.zip`` file. Nothing is read
+    here: a broken bundle is found like any other and refused by
+    :func:`~realpen.profile.bundle.load_profile`, which callers that list many profiles catch
+    per bundle.
+
+    Raises:
+        RealPenError: a folder of ``extra`` that is not a folder, or a folder of profiles that
+            cannot be listed (naming it).
     """
     found = []
     for where, folder in profile_locations(extra):
-        if not folder.is_dir():
-            continue
-        for entry in sorted(folder.iterdir()):
-            if (entry.is_dir() and (entry / PROFILE_JSON).is_file()) or entry.suffix == ".zip":
-                found.append((where, entry))
+        try:
+            if not folder.is_dir():
+                if where == "extra":  # asked for by name: say so (the others are optional)
+                    raise fail(folder, "no such folder of profiles")
+                continue
+            for entry in sorted(folder.iterdir()):
+                # lexists: a profile.json that is there at all (a symlink, even dangling, or a
+                # special file) makes a bundle to load, and so to refuse by name, not to omit.
+                if (entry.is_dir() and os.path.lexists(entry / PROFILE_JSON)) \
+                        or entry.suffix == ".zip":
+                    found.append((where, entry))
+        except OSError as error:  # not permitted to list or to look inside
+            raise fail(folder, f"cannot list this profiles folder ({error.strerror or error})") \
+                from None
     return found
 
 
@@ -57,7 +73,11 @@ def resolve_profile(name_or_path: str | os.PathLike,
     """
     name_or_path = os.fspath(name_or_path)
     candidate = Path(name_or_path)
-    if candidate.exists() or candidate.suffix == ".zip" or os.sep in name_or_path:
+    try:
+        exists = candidate.exists()
+    except OSError:  # something is there that cannot be looked at: load_profile names it
+        exists = True
+    if exists or candidate.suffix == ".zip" or os.sep in name_or_path:
         return load_profile(candidate)
     for _, path in list_profiles(extra):
         if path.name == name_or_path or path.stem == name_or_path:

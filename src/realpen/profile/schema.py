@@ -27,6 +27,11 @@ separators), so the same pen has the same version on every machine. ``files`` is
 because the WAVs follow from the rest (components; the sound's source hash and start), while
 their bytes, and so their SHA-256, can differ in the last bits of a float between machines.
 
+Limits. Every number is finite, and the sizes are bounded so that no ``profile.json`` can
+make a reader allocate much: each WAV holds at most :data:`MAX_WAV_FRAMES` frames and is at
+most :data:`MAX_WAV_BYTES` bytes, rates are :data:`realpen.io.limits.MIN_RATE_HZ` to
+:data:`realpen.io.limits.MAX_RATE_HZ`, lengths in ms at most :data:`MAX_SECTION_MS`.
+
 Imports pydantic and numpy only (the Coupling type is loaded when a document is validated), so
 the WebSocket schema can import :data:`NAME_PATTERN` without scipy or soundfile.
 """
@@ -34,6 +39,7 @@ the WebSocket schema can import :data:`NAME_PATTERN` without scipy or soundfile.
 from __future__ import annotations
 
 import copy
+import math
 import sys
 from dataclasses import MISSING
 from typing import Annotated, Any, Literal
@@ -52,19 +58,43 @@ from pydantic import (
     model_validator,
 )
 
+from realpen.io.limits import MAX_RATE_HZ, MIN_RATE_HZ
 from realpen.tactile.actuator import KINDS, Actuator
 from realpen.tactile.pattern import Component, TactilePattern, content_version, json_fields
 
 __all__ = ["FORMAT", "READABLE_FORMATS", "NAME_PATTERN", "PROFILE_JSON", "TACTILE_WAV",
            "SOUND_WAV", "BUNDLE_FILES", "ComponentModel", "TactileModel", "SoundSection",
            "WavFile", "BundleFiles", "SourceFile", "Provenance", "ProfileMeta", "model_of",
-           "upgrade", "profile_version"]
+           "upgrade", "profile_version", "MAX_WAV_FRAMES", "MAX_WAV_BYTES", "MAX_SECTION_MS"]
 
 FORMAT = 2
 READABLE_FORMATS = (1, 2)
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 PROFILE_JSON, TACTILE_WAV, SOUND_WAV = "profile.json", "tactile.wav", "sound.wav"
 BUNDLE_FILES = (PROFILE_JSON, TACTILE_WAV, SOUND_WAV)
+
+MAX_WAV_FRAMES = 2**21
+"""The most frames (samples; the WAVs are mono) of a bundle's ``tactile.wav`` or ``sound.wav``:
+2,097,152, 8 MiB as 32-bit float. A tactile pattern is 1.5 s (12,000 frames at 8 kHz; 576,000
+at 384 kHz) and a sound unit 300 ms (14,400 at 48 kHz), so this leaves room for long or
+high-rate pens while a forged header cannot ask for gigabytes."""
+MAX_WAV_BYTES = 4 * MAX_WAV_FRAMES + 64 * 1024
+"""The largest ``tactile.wav`` or ``sound.wav`` read (bytes): :data:`MAX_WAV_FRAMES` frames of
+32-bit float plus 64 KiB for the header and chunks (``fmt``, ``smpl``, ``LIST``)."""
+MAX_SECTION_MS = 60_000.0
+"""The longest sound unit or crossfade a ``profile.json`` may state (ms); a unit is 300 ms."""
+
+
+def _finite_number(value: Any) -> int | float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        shown = repr(value) if isinstance(value, (bool, float)) else type(value).__name__
+        raise ValueError(f"must be a finite number, got {shown}")
+    return value
+
+
+# A figure of a free-form table (the seam report): a JSON int or float as it is, never a string,
+# a boolean or an overflowed float (1e999 parses as inf).
+FiniteNumber = Annotated[Any, PlainValidator(_finite_number), WithJsonSchema({"type": "number"})]
 
 
 class _Strict(BaseModel):
@@ -136,7 +166,8 @@ def _coupling(value: Any):
     except ValidationError as error:
         first = error.errors()[0]
         where = ".".join(str(part) for part in first["loc"])
-        raise ValueError(f"{where}: {first['msg']}" if where else first["msg"]) from None
+        message = first["msg"].removeprefix("Value error, ")  # pydantic adds it again outside
+        raise ValueError(f"{where}: {message}" if where else message) from None
 
 
 CouplingField = Annotated[Any, PlainValidator(_coupling),
@@ -147,24 +178,28 @@ CouplingField = Annotated[Any, PlainValidator(_coupling),
 
 
 class SoundSection(_Strict):
-    """The friction-sound unit: its rate (Hz), length (frames) and how it was cut."""
+    """The friction-sound unit: its rate (Hz), length (frames) and how it was cut: unit and
+    wrap crossfade (ms), where it starts in the recording (s), its RMS level (dBFS) and the seam
+    report (:class:`realpen.sound.loop.Seam`'s figures)."""
 
-    rate: int = Field(gt=0)
-    frames: int = Field(gt=0)
+    rate: int = Field(ge=MIN_RATE_HZ, le=MAX_RATE_HZ)
+    frames: int = Field(gt=0, le=MAX_WAV_FRAMES)
     mode: Literal["loop", "granular"] = "loop"
-    unit_ms: float = Field(gt=0)
-    crossfade_ms: float = Field(ge=0)
-    start_s: float | None = None
+    unit_ms: float = Field(gt=0, le=MAX_SECTION_MS)
+    crossfade_ms: float = Field(ge=0, le=MAX_SECTION_MS)
+    start_s: float | None = Field(None, ge=0)
     rms_dbfs: float
-    seam: dict
+    # The seam report's figures (dB, percent, a count; {} when not measured): numbers only, as
+    # `profile show` and the plots format them.
+    seam: dict[str, FiniteNumber]
 
 
 class WavFile(_Strict):
     """One WAV of the bundle: its name, rate (Hz), length (frames) and SHA-256."""
 
     file: str
-    rate: int = Field(gt=0)
-    frames: int = Field(gt=0)
+    rate: int = Field(ge=MIN_RATE_HZ, le=MAX_RATE_HZ)
+    frames: int = Field(gt=0, le=MAX_WAV_FRAMES)
     sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
 
 
