@@ -214,3 +214,38 @@ def test_profile_build_says_where_and_install_puts_it_in_the_profiles_folder(
                      sound, "--install")
     assert_clean_failure(result, "realpen: error: --name: '../up' is not a valid profile name")
     assert sorted(p.name for p in (home / "profiles").iterdir()) == ["mine"]
+
+
+def test_check_outputs_sees_an_input_through_links_and_inside_folders(tmp_path):
+    from realpen.cli.common import check_outputs, same_file
+    from realpen.errors import RealPenError
+
+    source = tmp_path / "rec.wav"
+    source.write_bytes(b"RIFF")
+    (tmp_path / "hard.wav").hardlink_to(source)
+    (tmp_path / "soft.wav").symlink_to(source.name)
+    assert same_file(tmp_path / "hard.wav", source) and same_file(tmp_path / "soft.wav", source)
+    assert not same_file(tmp_path / "new.wav", source)
+    for name in ("hard.wav", "soft.wav", "./rec.wav"):
+        with pytest.raises(RealPenError, match="would replace the recording itself"):
+            check_outputs(tmp_path / name, force=True, inputs={"recording": source})
+    bundle = tmp_path / "bundle"
+    bundle.mkdir()
+    with pytest.raises(RealPenError, match=r"new\.wav: lies inside the profile .*bundle"):
+        check_outputs(bundle / "sub" / "new.wav", force=True, inputs={"profile": bundle})
+    with pytest.raises(RealPenError, match="given for two outputs"):
+        check_outputs(tmp_path / "a.wav", tmp_path / "x" / ".." / "a.wav", force=True)
+    check_outputs(tmp_path / "new.wav", tmp_path / "other.wav", force=False,
+                  inputs={"recording": source, "profile": bundle})  # nothing in the way
+
+
+@pytest.mark.parametrize("digits", [20, 400])
+def test_integer_options_refuse_numbers_beyond_64_bits(digits):
+    result = run_cli("analyze", "missing.wav", "--top", "9" * digits)
+    assert_clean_failure(result, f"Invalid value for '--top': a {digits}-digit number is too "
+                                 f"large")
+    from realpen.examples import example_recording_path
+
+    # The largest 64-bit number reaches the library, whose limit names the flag.
+    result = run_cli("analyze", example_recording_path(), "--top", str(2 ** 63 - 1))
+    assert_clean_failure(result, "--top: must be <= 100, got 9.22337e+18")

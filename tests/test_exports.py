@@ -171,11 +171,13 @@ def test_resampled_loop_stays_seamless():
 def test_resample_refuses_a_rate_that_breaks_the_loop():
     with pytest.raises(ParameterError, match="^rate: .*whole number of samples"):
         resample_loop(np.zeros(12000), 8000, 44101)
-    with pytest.raises(ParameterError, match="^rate: must be a positive"):
-        resample_loop(np.zeros(12000), 8000, 0)
-    # An absurd rate is a one-line error, not a 30 GB allocation.
-    with pytest.raises(ParameterError, match="^rate: must be <= 384000 Hz"):
-        resample_loop(np.zeros(12000), 8000, 10 ** 9)
+    for rate in (0, 99, 10 ** 9):  # 10⁹ Hz: a one-line error, not a 30 GB allocation
+        with pytest.raises(ParameterError, match="^rate: must be a whole number of Hz from 100 "
+                                                 "to 384000, got"):
+            resample_loop(np.zeros(12000), 8000, rate)
+    # Within the rates, a period too long at the new rate is refused before resampling.
+    with pytest.raises(ParameterError, match="^rate: .*an export holds at most 33,554,432"):
+        resample_loop(np.zeros(2**24), 8000, 384000)
 
 
 def test_wav_stereo_puts_sound_left_and_tactile_right(pens):
@@ -693,3 +695,55 @@ def test_export_repr_is_one_line(pens):
     text = repr(render("ahap", pens["pencil"]))
     assert text.startswith("Export(") and "companions ['pencil-sound.wav']" in text
     assert len(text) < 200 and "\n" not in text
+
+
+# --- limits: what one export may hold ----------------------------------------------------------
+
+def test_exports_hold_at_most_ten_minutes(pens):
+    pattern = pens["pencil"].pattern  # 1.5 s
+    for fmt in ("haptic", "wav"):
+        assert render(fmt, pattern, repeats=100).data  # 150 s
+    long = TactilePattern(pattern.subpatterns, subpattern_ms=45_000)  # 675 s, 5.4 M samples
+    for fmt in ("ahap", "haptic", "android", "hjif", "wav"):
+        with pytest.raises(RealPenError, match="^long: the tactile pattern lasts 675 s; an "
+                                               "export holds at most 600 s"):
+            render(fmt, long, name="long")
+    medium = TactilePattern(pattern.subpatterns, subpattern_ms=1000)  # 15 s
+    with pytest.raises(ParameterError, match=r"^repeats: 41 periods of 15 s last 615 s"):
+        render("haptic", medium, repeats=41)
+
+
+def test_sample_exports_are_bounded_in_frames(pens):
+    with pytest.raises(ParameterError, match=r"^repeats: 100 × 576,000 frames at 384000 Hz make "
+                                             r"57,600,000 frames"):
+        render("wav", pens["pencil"], stereo=True, rate=384000, repeats=100)
+    stereo = render("wav", pens["pencil"], stereo=True, rate=384000, repeats=50)
+    assert sf.info(io.BytesIO(stereo.data)).frames == 50 * 576000
+
+
+def test_hjif_effects_are_counted_before_they_are_made(pens, monkeypatch):
+    from realpen.exports import hjif
+
+    made = json.loads(render("hjif", pens["pencil"], repeats=2).data)
+    count = len(made["perceptions"][0]["channels"][0]["bands"][0]["effects"])
+    monkeypatch.setattr(hjif, "MAX_EFFECTS", count - 1)
+    with pytest.raises(RealPenError, match=r"^pencil: a \.hjif file of 2 period\(s\) would hold "
+                                           r"[\d,]+ sine effects; the limit is"):
+        render("hjif", pens["pencil"], repeats=2)
+
+
+def test_ahap_sound_events_are_bounded(pens):
+    from types import SimpleNamespace
+
+    tiny = SimpleNamespace(samples=np.ones(2), rate=48000)  # a 42 µs loop: 36 000 events
+    with pytest.raises(RealPenError, match="more than 10,000 AudioCustom events"):
+        render("ahap", pens["pencil"].pattern, sound=tiny, name="pencil")
+
+
+def test_envelope_measured_in_blocks_is_the_same(pens, monkeypatch):
+    x = pens["marker"].tactile.astype(np.float64)
+    whole = env.measure(x, 8000)
+    monkeypatch.setattr(env, "_BLOCK_VALUES", 3000)  # one 2048-point window at a time
+    blocked = env.measure(x, 8000)
+    np.testing.assert_allclose(blocked.centroid_hz, whole.centroid_hz, rtol=1e-12)
+    np.testing.assert_array_equal(blocked.rms, whole.rms)

@@ -85,7 +85,9 @@ def test_a_page_that_reconnects_and_resends_stores_every_sample_once(client, sto
         for seq, first in ((2, 0), (3, 4)):
             assert talk(ws, {"type": "samples", "seq": seq, "stroke": 1, "index": first,
                              "samples": batch(first)})["type"] == "ack"
-    # The connection dropped mid-stroke: the server had to end it.
+    # The connection dropped mid-stroke: the server had to end it (committed once a request
+    # through the store's writer, queued after it, has answered).
+    assert client.get("/api/status").json()["samples"] == 8
     assert rows(store_path, "SELECT end_reason FROM strokes") == [("disconnect",)]
     with client.websocket_connect(WS) as ws:  # the page is back and resends what it was unsure of
         assert talk(ws, {**hello, "seq": 7})["type"] == "ack"

@@ -347,6 +347,9 @@ def test_disconnect_and_new_pen_down_end_the_open_stroke(client, store_path):
         again = stroke_messages("pencil", stroke=2, n=2, seq0=10)
         for m in again[:3]:
             talk(ws, m)
+    # The disconnect's end is queued to the store's writer; any request through the store comes
+    # after it, so once /api/status answers, it is committed.
+    assert client.get("/api/status").json()["strokes"] == 2
     ends = rows(store_path, "SELECT page_stroke, end_reason FROM strokes ORDER BY id")
     assert ends == [(1, "replaced"), (2, "disconnect")]
     kinds = [e["kind"] for e in device_log(client)]

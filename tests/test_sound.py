@@ -865,3 +865,75 @@ def test_csv_reader_names_the_file_and_line(tmp_path, content, problem):
         read_csv(path)
     assert str(caught.value) == f"{path}: {problem}" or (
         str(caught.value).startswith(f"{path}: ") and problem in str(caught.value))
+
+
+# --- limits: lengths, seeds, smoothing and render size ------------------------------------------
+
+@pytest.mark.parametrize("kwargs", [{"unit_ms": 60_001.0}, {"crossfade_ms": 1e12},
+                                    {"grain_ms": 60_001.0}])
+def test_lengths_are_at_most_a_minute_everywhere(kwargs):
+    (name,) = kwargs
+    x = lowpassed(1.0, 27)
+    for mode in ("loop", "granular"):
+        with pytest.raises(ParameterError, match=rf"^{name}: must be at most 60000 ms \(60 s\)"):
+            render_stroke(x, RATE, stroke(), Coupling(), mode, **kwargs)
+    call = granular_loop if "grain_ms" in kwargs else find_loop_unit
+    with pytest.raises(ParameterError, match=rf"^{name}: must be at most 60000 ms"):
+        call(x, RATE, **kwargs)
+
+
+def test_a_unit_too_short_for_its_seam_measures_is_blamed_before_the_crossfade():
+    with pytest.raises(ParameterError, match=r"^unit_ms: must be at least 60 ms"):
+        find_loop_unit(lowpassed(1.0, 28), RATE, unit_ms=5.0)  # shorter than the 10 ms crossfade
+
+
+@pytest.mark.parametrize("seed", [-1, 2 ** 63, 1.5, True])
+def test_grain_seeds_are_whole_numbers_of_64_bits(seed):
+    x = lowpassed(3.0, 29)
+    with pytest.raises(ParameterError, match="^seed: must be a whole number from 0 to "
+                                             "9223372036854775807"):
+        granular_loop(x, RATE, length_ms=500, seed=seed)
+    with pytest.raises(ParameterError, match="^seed: "):
+        render_stroke(x, RATE, stroke(), mode="granular", seed=seed)
+
+
+def test_a_render_longer_than_the_limit_is_refused_before_it_is_made(monkeypatch):
+    import realpen.sound.stroke
+
+    long = Trajectory.checked([0.0, 599.0], [0.0, 10.0], [0.0, 0.0], [0.5, 0.5])
+    with pytest.raises(ParameterError, match=r"^rate: a 599 s stroke at 384000 Hz is "
+                                             r"230,\d{3},\d{3} samples; a render holds at most "
+                                             r"33,554,432"):
+        render_stroke(lowpassed(1.0, 30), 384000, long)
+    # The limit is the render's length: a lowered one refuses the ordinary 1.8 s stroke too.
+    monkeypatch.setattr(realpen.sound.stroke, "MAX_RENDER_FRAMES", RATE)
+    with pytest.raises(ParameterError, match="^rate: "):
+        render_stroke(lowpassed(1.0, 30), RATE, stroke())
+
+
+def test_smoothing_time_constant_is_bounded():
+    from realpen.sound.coupling import MAX_SMOOTHING_MS
+
+    assert Coupling(smoothing_ms=MAX_SMOOTHING_MS).smoothing_ms == MAX_SMOOTHING_MS
+    with pytest.raises(RealPenError, match="c.json: smoothing_ms: "):
+        Coupling.from_json({"smoothing_ms": MAX_SMOOTHING_MS * 1.001}, "c.json")
+
+
+def test_grains_in_blocks_make_the_same_texture(monkeypatch):
+    import realpen.sound.granular
+
+    x = lowpassed(3.0, 31)
+    whole = granular_loop(x, RATE, length_ms=1000).samples
+    monkeypatch.setattr(realpen.sound.granular, "_BLOCK_VALUES", 5000)  # two 2400-sample grains
+    np.testing.assert_allclose(granular_loop(x, RATE, length_ms=1000).samples, whole,
+                               rtol=0, atol=1e-12)
+
+
+def test_a_grain_too_long_for_any_texture_is_blamed_not_the_length():
+    x = lowpassed(1.0, 32)
+    with pytest.raises(ParameterError, match=r"^grain_ms: must be at most 30000 ms \(a texture "
+                                             r"holds two grains"):
+        granular_loop(x, RATE, grain_ms=40_000, length_ms=60_000)
+    with pytest.raises(ParameterError, match=r"^length_ms: must be at least 200 ms \(two 100 ms "
+                                             r"grains"):
+        granular_loop(x, RATE, grain_ms=100, length_ms=150)

@@ -95,3 +95,39 @@ def test_analysis_json_shape():
     assert set(unit) == {"start_s", "frequencies_hz", "powers"}
     assert unit["start_s"] == pytest.approx(0.3, abs=1e-3)
     assert sorted(round(f) for f in unit["frequencies_hz"]) == [100, 250]
+
+
+# --- limits: refused before any large allocation -----------------------------------------------
+
+@pytest.mark.parametrize("options, parameter", [
+    ({"top": 101}, "top"),                 # MAX_TOP = 100
+    ({"top": 2.5}, "top"),                 # a count is whole
+    ({"count": 1001}, "count"),            # MAX_SUBPATTERNS = 1000
+    ({"unit_ms": 60_001.0}, "unit_ms"),    # MAX_UNIT_MS = one minute
+])
+def test_analyze_refuses_sizes_past_their_limits(options, parameter):
+    x = sines([200], [1], RATE, 3.0)
+    with pytest.raises(ParameterError) as caught:
+        analyze(x, RATE, **options)
+    assert caught.value.parameter == parameter
+
+
+def test_units_of_too_few_or_too_many_samples_name_unit_ms_and_the_source():
+    x = sines([200], [1], RATE, 3.0)
+    with pytest.raises(ParameterError, match=r"^unit_ms: 1e-06 ms is only 0 samples at 1344 Hz "
+                                             r"\(take3\); a unit needs at least 8"):
+        analyze(x, RATE, unit_ms=1e-6, source="take3")
+    # 2²⁰ + 1 samples in one unit: its zero-padded FFT would be 2²⁴ points.
+    with pytest.raises(ParameterError, match=r"^unit_ms: .* 1,048,577 samples at 1e\+06 Hz"):
+        principal_frequencies(np.ones(10), 1e6, unit_ms=1048.577)
+
+
+def test_more_units_than_the_limit_are_refused_before_their_arrays_are_made(monkeypatch):
+    import realpen.dsp.spectrum
+
+    monkeypatch.setattr(realpen.dsp.spectrum, "MAX_UNITS", 50)  # the real one: 2¹⁸
+    x = np.random.default_rng(0).normal(size=8 * 51)  # units of 8 samples
+    with pytest.raises(ParameterError, match=r"^unit_ms: long\.wav holds 51 units of 1 ms; an "
+                                             r"analysis takes at most 50"):
+        principal_frequencies(x, 8000.0, unit_ms=1.0, source="long.wav")
+    assert len(principal_frequencies(x[:8 * 50], 8000.0, unit_ms=1.0, top=1)[0]) == 50

@@ -255,6 +255,14 @@ def test_condition_sets_its_counts():
     ({"condition": "Z"}, "condition"), ({"unit_ms": 150, "selection_unit_ms": 100},
                                         "selection_unit_ms"),
     ({"top": 2.5}, "top"),
+    # Limits on what sizes the pattern or its analysis (realpen.dsp.limits, synthesis).
+    ({"top": 101}, "top"), ({"subpatterns": 1001}, "subpatterns"),
+    ({"unit_ms": 60_001}, "unit_ms"), ({"seed": 2 ** 63}, "seed"), ({"cap_db": 61}, "cap_db"),
+    ({"rate": 99}, "rate"), ({"analysis_rate": 400_001}, "analysis_rate"),
+    ({"analysis_rate": 99}, "analysis_rate"),
+    ({"unit_ms": 1e-6}, "unit_ms"),  # less than one sample: not the crossfade's fault
+    ({"subpatterns": 300, "unit_ms": 60_000}, "subpatterns"),  # 144 M samples at 8 kHz
+    ({"unit_ms": 60_000, "subpatterns": 1, "rate": 384_000}, "unit_ms"),  # 23 M samples
 ])
 def test_bad_parameters_are_named_by_their_python_name(options, parameter):
     with pytest.raises(ParameterError) as info:
@@ -372,6 +380,11 @@ def test_pattern_version_ignores_the_last_bits_of_floats():
     (lambda: TactilePattern([[Component(100.0, 0.5)]], boundary="soft"), "boundary"),
     (lambda: TactilePattern([[Component(100.0, 0.5)]], crossfade_ms=101), "crossfade_ms"),
     (lambda: TactilePattern([[Component(100.0, 0.5)]]).with_samples(np.zeros(10)), "samples"),
+    (lambda: TactilePattern([[Component(100.0, 0.5)]] * 1001), "subpatterns"),
+    (lambda: TactilePattern([[Component(100.0 + k, 0.01) for k in range(101)]]), "subpatterns"),
+    (lambda: TactilePattern([[Component(100.0, 0.5)]] * 300, subpattern_ms=60_000), "subpatterns"),
+    (lambda: TactilePattern([[Component(100.0, 0.5)]] * 2, subpattern_ms=60_000).render(384_000),
+     "rate"),
 ])
 def test_bad_patterns_are_refused_by_parameter(make, parameter):
     with pytest.raises(ParameterError) as info:
@@ -460,3 +473,28 @@ def test_updated_keeps_counts_consistent(example):
         b.updated(colour="red")
     pattern = build_pattern(example, "flat", TactileParams(seed=2), condition="F")
     assert pattern.params.condition == "F" and pattern.params.seed == 2
+
+
+def test_tactile_crossfade_longer_than_the_unit_names_both():
+    with pytest.raises(ParameterError, match=r"^crossfade_ms: 5 ms is longer than the 3 ms "
+                                             r"sub-pattern; shorten the crossfade"):
+        TactileParams(unit_ms=3)
+
+
+def test_synthesis_in_blocks_of_components_is_the_same_sum(monkeypatch):
+    import realpen.tactile.synthesis as synthesis
+
+    rng = np.random.default_rng(4)
+    subs = [(rng.uniform(40, 600, 12), rng.uniform(0, 0.1, 12), rng.uniform(0, 6, 12),
+             rng.random(12) < 0.5, rng.random(12) < 0.5) for _ in range(3)]
+    whole = synthesize(subs, 8000, 100, "crossfade", 5)
+    # 900 values per block: one component of an 840-sample sub-pattern (800 + 40 fade) at a time.
+    monkeypatch.setattr(synthesis, "_BLOCK_VALUES", 900)
+    np.testing.assert_allclose(synthesize(subs, 8000, 100, "crossfade", 5), whole,
+                               rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("spec", ["", "   "])
+def test_an_empty_actuator_spec_is_not_the_current_folder(spec):
+    with pytest.raises(ParameterError, match="^actuator: is empty"):
+        parse_actuator(spec)

@@ -52,13 +52,26 @@ def require_number(parameter: str, value: float, minimum: float | None = None,
     ...
     realpen.errors.ParameterError: top: must be >= 1, got 0
     """
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ParameterError(parameter, f"must be a finite number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            (isinstance(value, float) and not math.isfinite(value)):
+        raise ParameterError(parameter, f"must be a finite number, got {_shown(value)}")
     if minimum is not None and (value < minimum or (not inclusive and value == minimum)):
         relation = ">=" if inclusive else ">"
-        raise ParameterError(parameter, f"must be {relation} {minimum:g}, got {value:g}")
+        raise ParameterError(parameter, f"must be {relation} {minimum:g}, got {_shown(value)}")
     if maximum is not None and value > maximum:
-        raise ParameterError(parameter, f"must be <= {maximum:g}, got {value:g}")
+        raise ParameterError(parameter, f"must be <= {maximum:g}, got {_shown(value)}")
+
+
+def _shown(value: object) -> str:
+    """A value for a message: numbers as ``:g``; an integer too large for a float (or for
+    ``str``, past 4300 digits) by its size."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**17:
+        digits = math.floor(value.bit_length() * math.log10(2)) + 1
+        return f"an integer of about {digits} digits"
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return f"{value:g}"
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def require_choice(parameter: str, value: object, choices: tuple[str, ...]) -> None:

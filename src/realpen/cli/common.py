@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
@@ -12,7 +13,7 @@ from rich.console import Console
 from realpen.errors import RealPenError, fail
 
 __all__ = ["console", "err_console", "PROGRESS_AFTER_S", "progress_bar", "force_option",
-           "check_outputs"]
+           "check_outputs", "same_file", "whole_number"]
 
 # Markup off: paths, tool names and descriptions are the user's text, not rich markup.
 console = Console(soft_wrap=True, markup=False, highlight=False)
@@ -27,34 +28,76 @@ def force_option(*names: str) -> bool:
                         help="Replace output files that already exist (refused otherwise).")
 
 
+LARGEST_WHOLE_NUMBER = 2**63 - 1
+"""The largest integer an option takes (64 bits): larger ones mean nothing to any parameter,
+and past about 309 digits they cannot even be compared with a float limit."""
+
+
+def whole_number(value: int | None) -> int | None:
+    """Typer callback of integer options: refuse a number beyond 64 bits while reading it.
+
+    click reads any number of digits into a Python int; the parameter's own limit (checked by
+    the library, named by its flag) then says what is allowed.
+
+    Raises:
+        typer.BadParameter: beyond ±:data:`LARGEST_WHOLE_NUMBER` (one line naming the flag).
+    """
+    if value is not None and not -LARGEST_WHOLE_NUMBER - 1 <= value <= LARGEST_WHOLE_NUMBER:
+        digits = len(str(abs(value)))
+        raise typer.BadParameter(f"a {digits}-digit number is too large (at most "
+                                 f"{LARGEST_WHOLE_NUMBER})")
+    return value
+
+
 def check_outputs(*outputs: Path | None, force: bool, force_flag: str = "--force",
                   folders: bool = False, inputs: Mapping[str, Path | None] | None = None) -> None:
     """Refuse outputs that would silently replace something, before any work is done.
 
     Args:
-        outputs: the files the command will write (None: not asked for).
+        outputs: the files the command will write, side files included (None: not asked for).
         force: the user passed ``force_flag``: existing files may be replaced.
         force_flag: how the command names that option, for the message.
         folders: an output may be a folder (a profile bundle); otherwise an existing folder
             given as an output is refused, with or without ``force``.
-        inputs: files the command reads, by what they are (``{"recording": path}``); an
-            output that is one of them is refused, with or without ``force``.
+        inputs: files (or bundle folders) the command reads, by what they are
+            (``{"recording": path}``). An output that is one of them — by path, through a
+            symbolic link or as a hard link —, lies inside an input folder, or (with
+            ``folders``) is a folder holding an input is refused, with or without ``force``.
 
     Raises:
         RealPenError: one line naming the path: ``"<path>: exists; pass --force to replace
             it"``, an output given twice, an output that is an input, or a folder.
     """
     given = [Path(out) for out in outputs if out is not None]
+    sources = {label: Path(source) for label, source in (inputs or {}).items()
+               if source is not None}
     for index, out in enumerate(given):
-        for label, source in (inputs or {}).items():
-            if source is not None and out.exists() and out.resolve() == Path(source).resolve():
+        for label, source in sources.items():
+            if same_file(out, source):
                 raise fail(out, f"would replace the {label} itself; name another file to write")
-        if any(out.resolve() == other.resolve() for other in given[:index]):
+            if source.is_dir() and out.resolve().is_relative_to(source.resolve()):
+                raise fail(out, f"lies inside the {label} {source}; write it elsewhere")
+            if folders and source.resolve().is_relative_to(out.resolve()):
+                # A bundle folder is replaced whole, with whatever it holds.
+                raise fail(out, f"holds the {label} {source}; write the output elsewhere")
+        if any(same_file(out, other) for other in given[:index]):
             raise fail(out, "given for two outputs; name a different file for each")
         if out.is_dir() and not folders:
             raise fail(out, "is a folder; give the file to write")
-        if out.exists() and not force:
+        if (out.exists() or out.is_symlink()) and not force:
             raise RealPenError(f"{out}: exists; pass {force_flag} to replace it")
+
+
+def same_file(first: Path, second: Path) -> bool:
+    """Whether two paths name one file: the same resolved path (symbolic links followed), or,
+    when both exist, the same file on disk (hard links, bind mounts, case-insensitive file
+    systems)."""
+    if first.resolve() == second.resolve():
+        return True
+    try:
+        return first.exists() and second.exists() and os.path.samefile(first, second)
+    except OSError:  # unreadable: then the paths were compared above
+        return False
 
 
 @contextlib.contextmanager

@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 
 from realpen.cli import app
-from realpen.cli.common import check_outputs, console, force_option
+from realpen.cli.common import check_outputs, console, force_option, whole_number
 
 # realpen.exports.FORMATS, written out so that help needs no numpy; a test checks they agree.
 FORMAT_NAMES = ("wav", "c-header", "ahap", "haptic", "android", "hjif")
@@ -27,10 +27,11 @@ def export(
     stereo: bool | None = typer.Option(None, "--stereo",
                                        help="wav: sound left, tactile pattern right."),
     rate: int | None = typer.Option(None, "--rate",
-                                    help="wav, c-header: output rate in Hz (polyphase)."),
+                                    help="wav, c-header: output rate in Hz (polyphase).",
+                                    callback=whole_number),
     repeats: int | None = typer.Option(None, "--repeats",
                                        help="Periods to write, for formats without a loop "
-                                            "flag (and wav, android)."),
+                                            "flag (and wav, android).", callback=whole_number),
     force: bool = force_option(),
 ) -> None:
     """Export a pen profile: wav, c-header, ahap, haptic, android or hjif.
@@ -40,8 +41,13 @@ def export(
     from realpen.exports import companion_paths, export_profile
     from realpen.profile import resolve_profile
 
-    check_outputs(output, *companion_paths(fmt, output), force=force)
+    outputs = (output, *companion_paths(fmt, output))
+    given = Path(profile) if profile.strip() else None  # Path("") would be the current folder
+    check_outputs(*outputs, force=force,
+                  inputs={"profile": given if given is not None and given.exists() else None})
     loaded = resolve_profile(profile)
+    # A profile found by name lives in a folder too (bundled, or the user's): never write there.
+    check_outputs(*outputs, force=force, inputs={"profile": loaded.path})
     written = export_profile(loaded, fmt, output, stereo=stereo or None, rate=rate,
                              repeats=repeats)
     console.print(f"wrote {written.path}: {written.export.summary}")

@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 
 from realpen.cli import sub_app
-from realpen.cli.common import check_outputs, console, force_option
+from realpen.cli.common import check_outputs, console, force_option, whole_number
 from realpen.errors import fail
 
 hatt_app = sub_app("hatt", "HaTT texture models (Models_<texture>.xml): the (speed, force) grid, "
@@ -61,8 +61,10 @@ def synth(
                                      "(samples, rate, axes, units)."),
     rate: int | None = typer.Option(None, "--rate", metavar="HZ",
                                     help="Resample to this rate in Hz (polyphase; default: "
-                                         "the model's own, 1000 Hz in HaTT)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the white-noise excitation."),
+                                         "the model's own, 1000 Hz in HaTT).",
+                                    callback=whole_number),
+    seed: int = typer.Option(0, "--seed", help="Seed of the white-noise excitation.",
+                             callback=whole_number),
     overwrite: bool = force_option("--overwrite"),
 ) -> None:
     """Synthesise stylus vibration on a texture at one speed and force, as a recording.

@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 
 from realpen.cli import sub_app
-from realpen.cli.common import check_outputs, console, force_option, progress_bar
+from realpen.cli.common import check_outputs, console, force_option, progress_bar, whole_number
 from realpen.errors import RealPenError
 
 sound_app = sub_app("sound", "Friction sound: seamless loop units, the pressure/speed coupling "
@@ -63,7 +63,8 @@ def loop(
         help=f"Granular mode: length of the looping texture in ms (at most {MAX_LENGTH_MS:g}, "
              f"i.e. {MAX_LENGTH_MS / 1000:g} s)."),
     grain_ms: float = typer.Option(GRAIN_MS, "--grain-ms", help=GRAIN_HELP),
-    seed: int = typer.Option(0, "--seed", help="Granular mode: seed of the grain offsets."),
+    seed: int = typer.Option(0, "--seed", help="Granular mode: seed of the grain offsets.",
+                             callback=whole_number),
     rate: float = typer.Option(DEFAULT_RATE, "--rate", help=RATE_HELP),
     level_dbfs: float = typer.Option(REFERENCE_DBFS, "--level-dbfs", help=LEVEL_HELP),
     json_out: Path | None = typer.Option(None, "--json", help="Write the report as JSON."),
@@ -124,7 +125,8 @@ def render(
     unit_ms: float = typer.Option(UNIT_MS, "--unit-ms", help=UNIT_HELP),
     crossfade_ms: float = typer.Option(CROSSFADE_MS, "--crossfade-ms", help=CROSSFADE_HELP),
     grain_ms: float = typer.Option(GRAIN_MS, "--grain-ms", help=GRAIN_HELP),
-    seed: int = typer.Option(0, "--seed", help="Granular mode: seed of the grain offsets."),
+    seed: int = typer.Option(0, "--seed", help="Granular mode: seed of the grain offsets.",
+                             callback=whole_number),
     rate: float = typer.Option(DEFAULT_RATE, "--rate", help=RATE_HELP),
     level_dbfs: float = typer.Option(REFERENCE_DBFS, "--level-dbfs", help=LEVEL_HELP),
     force: bool = force_option(),

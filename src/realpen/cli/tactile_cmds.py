@@ -11,7 +11,14 @@ from pathlib import Path
 import typer
 
 from realpen.cli import app
-from realpen.cli.common import PROGRESS_AFTER_S, check_outputs, console, force_option, progress_bar
+from realpen.cli.common import (
+    PROGRESS_AFTER_S,
+    check_outputs,
+    console,
+    force_option,
+    progress_bar,
+    whole_number,
+)
 
 AXIS_HELP = "How axes become one: dft321 (default for several axes), magnitude, or x|y|z."
 # The study-1 conditions as realpen.tactile.conditions.CONDITIONS defines them (principal
@@ -25,8 +32,10 @@ CONDITION_HELP = ("Study-1 preset: A=5×15×100ms, B=10×15×100ms, C=15×15×10
 def analyze(
     recording: Path = typer.Argument(..., help="Vibration recording: WAV/FLAC, CSV or NPZ."),
     unit_ms: float = typer.Option(100.0, "--unit-ms", help="Unit sequence length in ms."),
-    top: int = typer.Option(10, "--top", help="Principal frequencies per unit."),
-    subpatterns: int = typer.Option(15, "--subpatterns", help="Consecutive units to select."),
+    top: int = typer.Option(10, "--top", help="Principal frequencies per unit.",
+                            callback=whole_number),
+    subpatterns: int = typer.Option(15, "--subpatterns", help="Consecutive units to select.",
+                                    callback=whole_number),
     highpass_hz: float = typer.Option(30.0, "--highpass", help="High-pass cutoff in Hz."),
     axis: str | None = typer.Option(None, "--axis", help=AXIS_HELP),
     select: str = typer.Option("stationary", "--select",
@@ -84,15 +93,18 @@ def tactile(
     actuator: str = typer.Option("lra:f0=175,q=8", "--actuator",
                                  help="lra:f0=..,q=.. | piezo:f0=..,q=.. | flat | measured.csv"),
     condition: str | None = typer.Option(None, "--condition", help=CONDITION_HELP),
-    top: int | None = typer.Option(None, "--top", help="Principal frequencies per sub-pattern."),
-    subpatterns: int | None = typer.Option(None, "--subpatterns", help="Sub-patterns (K)."),
+    top: int | None = typer.Option(None, "--top", help="Principal frequencies per sub-pattern.",
+                                   callback=whole_number),
+    subpatterns: int | None = typer.Option(None, "--subpatterns", help="Sub-patterns (K).",
+                                           callback=whole_number),
     unit_ms: float | None = typer.Option(None, "--unit-ms", help="Sub-pattern length in ms."),
-    rate: int = typer.Option(8000, "--rate", help="Output rate in Hz."),
+    rate: int = typer.Option(8000, "--rate", help="Output rate in Hz.", callback=whole_number),
     boundary: str = typer.Option("crossfade", "--boundary", help="crossfade | hard."),
     crossfade_ms: float = typer.Option(5.0, "--crossfade-ms", help="Crossfade length in ms."),
     amplitude: str = typer.Option("sqrt", "--amplitude",
                                   help="sqrt (∝ √power, energy-preserving) | power (literal)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the random phases."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the random phases.",
+                             callback=whole_number),
     cap_db: float = typer.Option(20.0, "--cap-db", help="Cap of the actuator weighting in dB."),
     select: str = typer.Option("stationary", "--select", help="stationary | middle."),
     highpass_hz: float = typer.Option(30.0, "--highpass", help="High-pass cutoff in Hz."),
@@ -113,13 +125,15 @@ def tactile(
     from realpen.tactile.build import build_pattern
     from realpen.tactile.conditions import TactileParams
 
-    check_outputs(output, json_out, force=force, inputs={"recording": recording})
+    response = parse_actuator(actuator)  # a measured response is a file read, like the recording
+    measured = Path(response.spec) if response.kind == "measured" else None
+    check_outputs(output, json_out, force=force,
+                  inputs={"recording": recording, "actuator response": measured})
     params = TactileParams.resolve(condition, top, subpatterns, unit_ms, rate=rate,
                                    boundary=boundary, crossfade_ms=crossfade_ms,
                                    amplitude=amplitude, seed=seed, cap_db=cap_db,
                                    selection=select, highpass_hz=highpass_hz, axis=axis,
                                    analysis_rate=analysis_rate)
-    response = parse_actuator(actuator)
     loaded = load_recording(recording, rate=input_rate)
     with progress_bar("analysing", loaded.duration > PROGRESS_AFTER_S) as progress:
         pattern = build_pattern(loaded, response, params, progress)

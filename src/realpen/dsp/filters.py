@@ -13,6 +13,7 @@ from scipy import fft as sp_fft
 from scipy import signal
 
 from realpen.errors import ParameterError, fail, require_choice, require_number
+from realpen.io.limits import MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ
 from realpen.io.recording import AXIS_CHOICES, Recording
 
 __all__ = ["dft321", "combine_axes", "resample", "highpass", "prepare", "SILENCE_DB"]
@@ -77,19 +78,29 @@ def resample(recording: Recording, rate: float, *, parameter: str = "rate") -> R
 
     Args:
         recording: any number of axes, at ``recording.rate`` Hz.
-        rate: the new rate in Hz, > 0.
+        rate: the new rate in Hz, from :data:`~realpen.io.limits.MIN_RATE_HZ` to
+            :data:`~realpen.io.limits.MAX_RATE_HZ`.
         parameter: the name the caller gave ``rate`` (e.g. ``"analysis_rate"``), for messages.
 
     Raises:
-        ParameterError: ``rate`` is not positive, or too low a fraction of the recording's rate.
+        ParameterError: ``rate`` out of range, too low a fraction of the recording's rate, or
+            one that would make more than :data:`~realpen.io.limits.MAX_FRAMES` samples
+            (checked before resampling).
     """
-    require_number(parameter, rate, minimum=0.0, inclusive=False)
+    require_number(parameter, rate, minimum=0.0, inclusive=False)  # "> 0" for 0 and below
+    require_number(parameter, rate, minimum=MIN_RATE_HZ, maximum=MAX_RATE_HZ)
     if abs(rate - recording.rate) < 1e-9:
         return recording
     ratio = Fraction(rate / recording.rate).limit_denominator(1000)
     if ratio.numerator == 0:
         raise ParameterError(parameter, f"{rate:g} Hz is too low to resample "
                                         f"{recording.rate:g} Hz to")
+    frames, axes = recording.samples.shape
+    made = -(-frames * ratio.numerator // ratio.denominator) * axes
+    if made > MAX_FRAMES:
+        raise ParameterError(parameter, f"{rate:g} Hz would make {made:,} samples of "
+                                        f"{recording.source}; at most {MAX_FRAMES:,} are "
+                                        f"allowed (a lower rate or a shorter recording)")
     out = signal.resample_poly(recording.samples, ratio.numerator, ratio.denominator, axis=0)
     actual = recording.rate * ratio.numerator / ratio.denominator
     return recording.with_samples(out, f"resample:{actual:g}Hz", rate=actual)
@@ -104,16 +115,18 @@ def highpass(recording: Recording, cutoff_hz: float = 30.0, order: int = 4) -> R
         order: Butterworth order of one pass.
 
     Raises:
-        ParameterError: ``cutoff_hz`` is negative or not a number.
-        RealPenError: when the rate is too low for the cutoff (Nyquist at or below it).
+        ParameterError: ``cutoff_hz`` is negative, not a number, or at or above the Nyquist
+            frequency of the recording (the message names the recording and its rate).
     """
     require_number("cutoff_hz", cutoff_hz, minimum=0.0)
     nyquist = recording.rate / 2
     if cutoff_hz == 0:
         return recording
     if cutoff_hz >= nyquist:
-        raise fail(recording.source, f"rate {recording.rate:g} Hz is too low for a "
-                                     f"{cutoff_hz:g} Hz high-pass (Nyquist {nyquist:g} Hz)")
+        # The cutoff is what the user chose; the recording's rate is a fact.
+        raise ParameterError("cutoff_hz", f"the rate of {recording.source} ({recording.rate:g} "
+                                          f"Hz) is too low for a {cutoff_hz:g} Hz high-pass "
+                                          f"(Nyquist {nyquist:g} Hz)")
     sos = signal.butter(order, cutoff_hz, btype="highpass", fs=recording.rate, output="sos")
     padlen = min(3 * (2 * len(sos) + 1), recording.samples.shape[0] - 1)
     filtered = signal.sosfiltfilt(sos, recording.samples, axis=0, padlen=max(padlen, 0))
@@ -135,7 +148,7 @@ def prepare(recording: Recording, axis: str | None = None, analysis_rate: float 
 
     Raises:
         ParameterError: an unknown ``axis``, a bad ``analysis_rate`` or ``highpass_hz``.
-        RealPenError: the rate is too low for the high-pass, or the result is silence.
+        RealPenError: the result is silence.
     """
     if axis is not None and axis not in recording.axes:
         require_choice("axis", axis, AXIS_CHOICES)

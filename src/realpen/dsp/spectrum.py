@@ -16,9 +16,18 @@ import numpy as np
 from scipy import signal
 from scipy.ndimage import maximum_filter1d
 
-from realpen.errors import RealPenError, fail, require_choice, require_number
+from realpen.dsp.limits import (
+    MAX_SUBPATTERNS,
+    MAX_TOP,
+    MAX_UNIT_MS,
+    MAX_UNIT_SAMPLES,
+    MAX_UNITS,
+    MIN_UNIT_SAMPLES,
+)
+from realpen.errors import ParameterError, RealPenError, require_choice, require_number
 
 __all__ = ["Analysis", "analyze", "principal_frequencies", "select_units", "fft_size",
+           "require_count", "unit_samples_for",
            "ProgressCallback", "SELECTIONS", "FEATURE_BANDS", "PEAK_FLOOR_DB"]
 
 ProgressCallback = Callable[[int, int], None]
@@ -83,6 +92,39 @@ class Analysis:
                 "selected": [int(i) for i in self.selected]}
 
 
+def require_count(parameter: str, value: int, maximum: int) -> int:
+    """``value`` as an int: a whole number from 1 to ``maximum``.
+
+    Raises:
+        ParameterError: (named ``parameter``) otherwise.
+    """
+    require_number(parameter, value, minimum=1, maximum=maximum)
+    if int(value) != value:
+        raise ParameterError(parameter, f"must be a whole number, got {value:g}")
+    return int(value)
+
+
+def unit_samples_for(unit_ms: float, rate: float, source: object = "signal") -> int:
+    """Samples in one unit sequence of ``unit_ms`` ms at ``rate`` Hz (rounded), checked to lie
+    between :data:`~realpen.dsp.limits.MIN_UNIT_SAMPLES` and
+    :data:`~realpen.dsp.limits.MAX_UNIT_SAMPLES`.
+
+    Raises:
+        ParameterError: (parameter ``unit_ms``) too few or too many samples; the message names
+            ``source``, whose rate it is.
+    """
+    unit_samples = int(round(unit_ms * rate / 1000.0))
+    if unit_samples < MIN_UNIT_SAMPLES:
+        raise ParameterError("unit_ms", f"{unit_ms:g} ms is only {unit_samples} samples at "
+                                        f"{rate:g} Hz ({source}); a unit needs at least "
+                                        f"{MIN_UNIT_SAMPLES}: use longer units")
+    if unit_samples > MAX_UNIT_SAMPLES:
+        raise ParameterError("unit_ms", f"{unit_ms:g} ms is {unit_samples:,} samples at "
+                                        f"{rate:g} Hz ({source}); a unit holds at most "
+                                        f"{MAX_UNIT_SAMPLES:,}: use shorter units")
+    return unit_samples
+
+
 def fft_size(unit_samples: int) -> int:
     """Zero-padded FFT length for a unit: the power of two ≥ 8 × its length (and ≥ 256)."""
     return max(256, 1 << int(np.ceil(np.log2(8 * unit_samples))))
@@ -110,17 +152,18 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
         ``(starts_s, frequencies_hz, powers, band_levels_db)`` as described in :class:`Analysis`.
 
     Raises:
-        ParameterError: a bad ``rate``, ``unit_ms`` or ``top``.
-        RealPenError: units shorter than 8 samples at this rate (naming ``source``).
+        ParameterError: a bad ``rate``, ``unit_ms`` or ``top`` (more than
+            :data:`~realpen.dsp.limits.MAX_TOP`); units of fewer than 8 or more than
+            :data:`~realpen.dsp.limits.MAX_UNIT_SAMPLES` samples at this rate, or more than
+            :data:`~realpen.dsp.limits.MAX_UNITS` units (parameter ``unit_ms``, naming
+            ``source``).
     """
     require_number("rate", rate, minimum=0.0, inclusive=False)
     require_number("unit_ms", unit_ms, minimum=0.0, inclusive=False)
-    require_number("top", top, minimum=1)
-    unit_samples = int(round(unit_ms * rate / 1000.0))
-    if unit_samples < 8:
-        raise fail(source, f"{unit_ms:g} ms units are only {unit_samples} samples at {rate:g} Hz; "
-                           f"record faster or use longer units")
+    top = require_count("top", top, MAX_TOP)
+    unit_samples = unit_samples_for(unit_ms, rate, source)
     count = len(x) // unit_samples
+    _check_units(count, unit_ms, source)
     nyquist = rate / 2
     fmax = nyquist if fmax is None else min(fmax, nyquist)
     nfft = fft_size(unit_samples)
@@ -155,6 +198,15 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
         if progress is not None:
             progress(min(first + chunk, count), count)
     return starts, out_freqs, out_powers, bands
+
+
+def _check_units(units: int, unit_ms: float, source: object) -> None:
+    """Refuse more than :data:`~realpen.dsp.limits.MAX_UNITS` units, before their arrays are
+    allocated."""
+    if units > MAX_UNITS:
+        raise ParameterError("unit_ms", f"{source} holds {units:,} units of {unit_ms:g} ms; an "
+                                        f"analysis takes at most {MAX_UNITS:,}: use longer units "
+                                        f"or a shorter recording")
 
 
 def _top_peaks(power: np.ndarray, in_band: np.ndarray, half_width: int, top: int,
@@ -208,11 +260,12 @@ def select_units(band_levels_db: np.ndarray, count: int, selection: str = "stati
         The unit indices, ascending.
 
     Raises:
-        ParameterError: an unknown ``selection`` or a ``count`` below 1.
+        ParameterError: an unknown ``selection`` or a ``count`` below 1 or above
+            :data:`~realpen.dsp.limits.MAX_SUBPATTERNS`.
         RealPenError: fewer than ``count + 2`` units.
     """
     require_choice("selection", selection, SELECTIONS)
-    require_number("count", count, minimum=1)
+    count = require_count("count", count, MAX_SUBPATTERNS)
     total = band_levels_db.shape[0]
     usable = total - 2
     if usable < count:
@@ -253,7 +306,8 @@ def analyze(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10, c
 
     Raises:
         ParameterError: a bad ``rate``, ``unit_ms``, ``top``, ``count`` or ``selection``
-            (worded with these names, e.g. ``"unit_ms: must be > 0, got -1"``).
+            (worded with these names, e.g. ``"unit_ms: must be > 0, got -1"``), each checked
+            against its limit in :mod:`realpen.dsp.limits` before anything is allocated.
         RealPenError: a silent or constant signal (no peaks), or a signal too short for
             ``count + 2`` units.
 
@@ -265,14 +319,14 @@ def analyze(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10, c
         200
     """
     require_number("rate", rate, minimum=0.0, inclusive=False)
-    require_number("unit_ms", unit_ms, minimum=0.0, inclusive=False)
-    require_number("top", top, minimum=1)
-    require_number("count", count, minimum=1)
+    require_number("unit_ms", unit_ms, minimum=0.0, inclusive=False, maximum=MAX_UNIT_MS)
+    top = require_count("top", top, MAX_TOP)
+    count = require_count("count", count, MAX_SUBPATTERNS)
     require_choice("selection", selection, SELECTIONS)
+    unit_samples = unit_samples_for(unit_ms, rate, source)
     if not np.any(np.abs(x) > 1e-12 * max(1.0, float(np.max(np.abs(x), initial=0.0)))):
         raise RealPenError(f"{source}: signal is silent or constant (no spectral peaks)")
-    unit_samples = int(round(unit_ms * rate / 1000.0))
-    units = len(x) // max(unit_samples, 1)
+    units = len(x) // unit_samples
     if units < count + 2:
         raise RealPenError(
             f"{source}: too short: {len(x) / rate:.3f} s holds {units} units of {unit_ms:g} ms; "

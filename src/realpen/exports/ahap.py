@@ -39,16 +39,20 @@ import math
 import numpy as np
 
 from realpen import __version__
-from realpen.errors import ParameterError
+from realpen.errors import ParameterError, fail
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_pattern, check_repeats, sound_samples
+from realpen.exports.base import Export, check_pattern, check_span, sound_samples
 from realpen.tactile.pattern import TactilePattern
 
-__all__ = ["SUFFIX", "MAX_CURVE_POINTS", "MAX_EVENT_S", "LIMITS", "build", "sound_wav", "export"]
+__all__ = ["SUFFIX", "MAX_CURVE_POINTS", "MAX_EVENT_S", "MAX_SOUND_EVENTS", "LIMITS", "build",
+           "sound_wav", "export"]
 
 SUFFIX = ".ahap"
 MAX_CURVE_POINTS = 16
 MAX_EVENT_S = 30.0
+MAX_SOUND_EVENTS = 10_000
+"""The most ``AudioCustom`` events one AHAP holds, one per sound unit: 2000 units of the
+method's 300 ms fill the longest export (:data:`~realpen.exports.base.MAX_EXPORT_S`)."""
 LIMITS = (
     "one waveform at a time: intensity follows the frame RMS, sharpness the spectral centroid",
     "no loop flag: loop with CHHapticAdvancedPatternPlayer.loopEnabled, loopEnd = period",
@@ -121,7 +125,7 @@ def build(pattern: TactilePattern, sound=None, *, repeats: int = 1,
         ParameterError: ``sound_events=True`` without a sound, or a bad ``repeats``.
     """
     pattern = check_pattern(pattern)
-    repeats = check_repeats(repeats)
+    repeats = check_span(pattern, repeats, name)
     with_sound = _wants_sound(sound, sound_events)
     measured = env.measure(pattern.samples, pattern.rate, source=name)
     times, intensity = env.loop_curve(measured, measured.intensity, repeats)
@@ -132,6 +136,10 @@ def build(pattern: TactilePattern, sound=None, *, repeats: int = 1,
     entries += _curves("HapticSharpnessControl", times, sharp)
     if with_sound:
         loop, rate = sound_samples(sound, "AHAP sound events")
+        if total * rate / len(loop) > MAX_SOUND_EVENTS:
+            raise fail(name, f"the sound loop ({len(loop) / rate * 1000:g} ms) would need more "
+                             f"than {MAX_SOUND_EVENTS:,} AudioCustom events over "
+                             f"{total:g} s")
         entries += _sounds(len(loop) / rate, total, sound_file or f"{name}-sound.wav")
     entries.sort(key=lambda entry: next(iter(entry.values()))["Time"])
     what = f"{tool}: " if tool else ""

@@ -37,7 +37,7 @@ import numpy as np
 
 from realpen import __version__
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_pattern, check_repeats
+from realpen.exports.base import Export, check_pattern, check_span
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["SUFFIX", "KOTLIN_SUFFIX", "ENVELOPE_SEGMENTS", "MIN_POINT_MS", "GUARANTEED_POINTS",
@@ -171,7 +171,7 @@ def build(pattern: TactilePattern, coupling=None, *, repeats: int = 1, name: str
         version: recorded as ``profile_version`` (default: the pattern's version).
     """
     pattern = check_pattern(pattern)
-    repeats = check_repeats(repeats)
+    repeats = check_span(pattern, repeats, name)
     measured = env.measure(pattern.samples, pattern.rate, source=name)
     waveform_env, basic_env = envelopes(measured, repeats)
     count = len(basic_env["control_points"])

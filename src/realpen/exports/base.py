@@ -7,14 +7,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from realpen.errors import ParameterError
+from realpen.errors import ParameterError, fail
 from realpen.tactile.pattern import TactilePattern
-from realpen.tactile.synthesis import MAX_RATE
+from realpen.tactile.synthesis import MAX_RATE, MIN_RATE
 
-__all__ = ["Export", "MAX_REPEATS", "check_repeats", "check_pattern", "sound_samples",
-           "resample_loop", "title"]
+__all__ = ["Export", "MAX_REPEATS", "MAX_EXPORT_S", "MAX_EXPORT_FRAMES", "check_repeats",
+           "check_span", "check_frames", "check_pattern", "sound_samples", "resample_loop",
+           "title"]
 
 MAX_REPEATS = 100  # 150 s of a 1.5 s pattern; players loop, files need not
+MAX_EXPORT_S = 600.0
+"""The longest stretch of time one export holds (s): ``repeats`` periods of the pattern (of the
+stereo WAV's common length). Ten minutes; the method's pattern is 1.5 s and players loop. The
+envelope formats hold a point every 10 ms of it, :mod:`~realpen.exports.hjif` an effect per
+component and sub-pattern."""
+MAX_EXPORT_FRAMES = 2**25
+"""The most frames a sample-based export (WAV, C header) holds: 33 554 432 (87 s at 384 kHz,
+11.6 min at 48 kHz; 128 MiB as float32 mono)."""
 
 
 @dataclass
@@ -69,6 +78,43 @@ def check_repeats(repeats: int) -> int:
     return int(repeats)
 
 
+def check_span(pattern: TactilePattern, repeats: int, name: str = "pattern") -> int:
+    """``repeats`` checked (:func:`check_repeats`), and ``repeats`` periods of ``pattern``
+    checked against :data:`MAX_EXPORT_S`, before anything is measured or rendered.
+
+    Raises:
+        ParameterError: (parameter ``repeats``) a bad count, or too many periods.
+        RealPenError: one period alone is longer than :data:`MAX_EXPORT_S` (naming ``name``).
+    """
+    repeats = check_repeats(repeats)
+    period = check_pattern(pattern).duration_s
+    if period > MAX_EXPORT_S:
+        raise fail(name, f"the tactile pattern lasts {period:g} s; an export holds at most "
+                         f"{MAX_EXPORT_S:g} s")
+    if period * repeats > MAX_EXPORT_S:
+        raise ParameterError("repeats", f"{repeats} periods of {period:g} s last "
+                                        f"{period * repeats:g} s; an export holds at most "
+                                        f"{MAX_EXPORT_S:g} s")
+    return repeats
+
+
+def check_frames(period_frames: int, repeats: int, rate: int) -> None:
+    """Refuse a sample-based export of ``repeats`` × ``period_frames`` frames at ``rate`` Hz
+    that holds more than :data:`MAX_EXPORT_FRAMES` frames or lasts more than
+    :data:`MAX_EXPORT_S`, before it is tiled.
+
+    Raises:
+        ParameterError: naming ``repeats`` when more than one period is asked for, else
+            ``rate``.
+    """
+    frames = period_frames * repeats
+    if frames > MAX_EXPORT_FRAMES or frames / rate > MAX_EXPORT_S:
+        raise ParameterError("repeats" if repeats > 1 else "rate",
+                             f"{repeats} × {period_frames:,} frames at {rate} Hz make "
+                             f"{frames:,} frames ({frames / rate:g} s); an export holds at "
+                             f"most {MAX_EXPORT_FRAMES:,} frames and {MAX_EXPORT_S:g} s")
+
+
 def sound_samples(sound: object, needed_for: str) -> tuple[np.ndarray, int]:
     """The samples (float64, mono) and rate (Hz) of a sound loop.
 
@@ -111,21 +157,28 @@ def resample_loop(x: np.ndarray, rate: int, new_rate: int, what: str = "pattern"
         what: how to name the signal in an error.
 
     Raises:
-        ParameterError: (parameter ``rate``) ``new_rate`` is not positive, or the period is not
-            a whole number of samples at ``new_rate`` (the loop would drift by a fraction of a
-            sample each time).
+        ParameterError: (parameter ``rate``) ``new_rate`` is not a whole number of Hz from
+            :data:`~realpen.tactile.synthesis.MIN_RATE` to
+            :data:`~realpen.tactile.synthesis.MAX_RATE`, the period would exceed
+            :data:`MAX_EXPORT_FRAMES` at it, or the period is not a whole number of samples at
+            ``new_rate`` (the loop would drift by a fraction of a sample each time).
     """
     from scipy.signal import resample_poly
 
-    if isinstance(new_rate, bool) or int(new_rate) != new_rate or new_rate <= 0:
-        raise ParameterError("rate", f"must be a positive whole number of Hz, got {new_rate}")
-    if new_rate > MAX_RATE:
-        raise ParameterError("rate", f"must be <= {MAX_RATE:g} Hz, got {new_rate:g}")
+    if isinstance(new_rate, bool) or not isinstance(new_rate, (int, float, np.integer)) \
+            or not np.isfinite(new_rate) or int(new_rate) != new_rate \
+            or not MIN_RATE <= new_rate <= MAX_RATE:
+        raise ParameterError("rate", f"must be a whole number of Hz from {MIN_RATE:g} to "
+                                     f"{MAX_RATE:g}, got {new_rate}")
     new_rate = int(new_rate)
     if new_rate == rate:
         return np.asarray(x)
     x = np.asarray(x, dtype=np.float64)
     frames = len(x) * new_rate / rate
+    if frames > MAX_EXPORT_FRAMES:
+        raise ParameterError("rate", f"the {what} ({len(x) / rate:g} s) would be "
+                                     f"{frames:,.0f} samples at {new_rate} Hz; an export holds "
+                                     f"at most {MAX_EXPORT_FRAMES:,}")
     if abs(frames - round(frames)) > 1e-9:
         raise ParameterError("rate", f"the {what} ({len(x)} samples at {rate} Hz) is not a whole "
                                      f"number of samples at {new_rate} Hz; choose a rate that "

@@ -25,6 +25,7 @@ __all__ = ["FRAME_MS", "WINDOW_MS", "SHARPNESS_RANGE_HZ", "Envelope", "measure",
 FRAME_MS = 10.0  # short enough for the beating between components, long enough to average
 WINDOW_MS = 40.0  # centroid window: 25 Hz resolution before zero padding
 SHARPNESS_RANGE_HZ = (30.0, 500.0)  # high-pass of the method … upper edge of touch
+_BLOCK_VALUES = 2**22  # spectrum bins computed at once (64 MiB as complex)
 
 
 @dataclass(frozen=True)
@@ -111,17 +112,23 @@ def measure(samples: np.ndarray, rate: float, frame_ms: float = FRAME_MS,
 
     width = max(4, int(round(window_ms * rate / 1000.0)))
     window = np.hanning(width + 2)[1:-1]
-    index = (np.round(centres).astype(int)[:, None] + np.arange(width)[None, :] - width // 2) % n
     nfft = 1 << int(np.ceil(np.log2(4 * width)))
-    power = np.abs(np.fft.rfft(x[index] * window, nfft, axis=1)) ** 2
     freqs = np.fft.rfftfreq(nfft, 1.0 / rate)
-    total = power.sum(axis=1)
+    starts = np.round(centres).astype(int) - width // 2
+    total, weighted = np.empty(count), np.empty(count)
+    # Frames in blocks: memory stays bounded however long the pattern is.
+    step = max(1, _BLOCK_VALUES // nfft)
+    for first in range(0, count, step):
+        index = (starts[first:first + step, None] + np.arange(width)[None, :]) % n
+        power = np.abs(np.fft.rfft(x[index] * window, nfft, axis=1)) ** 2
+        total[first:first + step] = power.sum(axis=1)
+        weighted[first:first + step] = (power * freqs).sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        centroid = (power * freqs).sum(axis=1) / total
+        centroid = weighted / total
     silent = ~(total > 0)
     if silent.any():
         # A silent window has no centroid; the pattern's overall one stands in for it.
-        centroid[silent] = float((power[~silent] * freqs).sum() / total[~silent].sum())
+        centroid[silent] = float(weighted[~silent].sum() / total[~silent].sum())
     return Envelope(edges / rate, rms, centroid)
 
 

@@ -24,7 +24,7 @@ import json
 
 from realpen import __version__
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_pattern, check_repeats
+from realpen.exports.base import Export, check_pattern, check_span
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["SUFFIX", "LIMITS", "build", "export"]
@@ -47,7 +47,7 @@ def build(pattern: TactilePattern, *, repeats: int = 1, name: str = "pattern", t
         name, tool, version: for ``metadata`` (version default: the pattern's).
     """
     pattern = check_pattern(pattern)
-    repeats = check_repeats(repeats)
+    repeats = check_span(pattern, repeats, name)
     measured = env.measure(pattern.samples, pattern.rate, source=name)
     times, intensity = env.loop_curve(measured, measured.intensity, repeats)
     _, sharp = env.loop_curve(measured, env.sharpness(measured.centroid_hz), repeats)

@@ -53,16 +53,21 @@ import json
 import numpy as np
 
 from realpen import __version__
-from realpen.exports.base import Export, check_pattern, check_repeats, title
+from realpen.errors import fail
+from realpen.exports.base import Export, check_pattern, check_span, title
 from realpen.tactile.pattern import Component, TactilePattern
 from realpen.tactile.synthesis import fade_samples, subpattern_samples
 
-__all__ = ["SUFFIX", "MAX_TIMESCALE", "MAX_DRIFT_RAD", "LIMITS", "effects", "build", "export"]
+__all__ = ["SUFFIX", "MAX_TIMESCALE", "MAX_DRIFT_RAD", "MAX_EFFECTS", "LIMITS", "effects",
+           "build", "export"]
 
 SUFFIX = ".hjif"
 MAX_TIMESCALE = 48000
 RAMP = np.linspace(0.0, 1.0, 5)  # keyframes across each crossfade
 MAX_DRIFT_RAD = 0.05  # phase error allowed at an effect's ends from whole-Hz frequencies
+MAX_EFFECTS = 100_000
+"""The most sine effects one ``.hjif`` file holds (about 1 kB of JSON each): the method's
+pattern needs about 600 per period."""
 LIMITS = (
     "frequencies rounded to whole Hz (phases re-set every piece: ≤ 0.05 rad drift)",
     "no loop flag: whole periods; the wrap crossfade is cut at the file's two ends",
@@ -112,11 +117,23 @@ def _effect(start: int, length: int, fade: int, component: Component, first: int
                            "frequency_modulation": frequency} for k, a in zip(ticks, v)]}
 
 
-def effects(pattern: TactilePattern, repeats: int = 1) -> tuple[list[dict], int]:
+def _pieces(component: Component, samples: int, rate: int) -> int:
+    """Pieces a component's effect over ``samples`` samples is split into, so that its
+    whole-Hz frequency drifts at most :data:`MAX_DRIFT_RAD` from its true phase."""
+    error_hz = abs(component.frequency_hz - max(1, round(component.frequency_hz)))
+    return max(1, int(np.ceil(np.pi * error_hz * samples / rate / MAX_DRIFT_RAD)))
+
+
+def effects(pattern: TactilePattern, repeats: int = 1, name: str = "pattern"
+            ) -> tuple[list[dict], int]:
     """All sine effects of ``repeats`` periods, sorted by position, and the timescale (ticks/s).
 
     A component whose whole-Hz frequency would drift more than :data:`MAX_DRIFT_RAD` from its
     true phase at either end of its span is split into equal pieces, each with its own phase.
+
+    Raises:
+        RealPenError: (naming ``name``) more than :data:`MAX_EFFECTS` effects, counted before
+            any is made.
     """
     tactile = check_pattern(pattern)
     rate = tactile.rate
@@ -126,13 +143,19 @@ def effects(pattern: TactilePattern, repeats: int = 1) -> tuple[list[dict], int]
     fade = fade_samples(rate, tactile.subpattern_ms, tactile.boundary, tactile.crossfade_ms)
     count = len(tactile.subpatterns)
     end = length * count * repeats
+    # Counted over full spans (the file's two ends are shorter): an upper bound.
+    needed = repeats * sum(_pieces(component, length + fade, rate)
+                           for sub in tactile.subpatterns for component in sub)
+    if needed > MAX_EFFECTS:
+        raise fail(name, f"a .hjif file of {repeats} period(s) would hold {needed:,} sine "
+                         f"effects; the limit is {MAX_EFFECTS:,} (fewer repeats or a shorter "
+                         f"pattern)")
     found = []
     for index in range(count * repeats):
         start = index * length
         lo, hi = max(0, start - fade // 2), min(end, start + length + fade - fade // 2)
         for component in tactile.subpatterns[index % count]:
-            error_hz = abs(component.frequency_hz - max(1, round(component.frequency_hz)))
-            pieces = max(1, int(np.ceil(np.pi * error_hz * (hi - lo) / rate / MAX_DRIFT_RAD)))
+            pieces = _pieces(component, hi - lo, rate)
             bounds = np.round(np.linspace(lo, hi, pieces + 1)).astype(int)
             found += [_effect(start, length, fade, component, int(a), int(b), rate, timescale)
                       for a, b in zip(bounds[:-1], bounds[1:])]
@@ -151,8 +174,8 @@ def build(pattern: TactilePattern, *, repeats: int = 1, date: str | None = None,
         name, tool, version: for the descriptions (version default: the pattern's).
     """
     pattern = check_pattern(pattern)
-    repeats = check_repeats(repeats)
-    found, timescale = effects(pattern, repeats)
+    repeats = check_span(pattern, repeats, name)
+    found, timescale = effects(pattern, repeats, name)
     frequencies = [effect["keyframes"][0]["frequency_modulation"] for effect in found]
     actuator = pattern.actuator
     device = {"id": 0, "name": actuator.spec if actuator is not None else "unspecified"}

@@ -23,7 +23,14 @@ import math
 import numpy as np
 
 from realpen.errors import RealPenError
-from realpen.exports.base import Export, check_pattern, check_repeats, resample_loop, sound_samples
+from realpen.exports.base import (
+    Export,
+    check_frames,
+    check_pattern,
+    check_span,
+    resample_loop,
+    sound_samples,
+)
 from realpen.io.files import wav_bytes
 from realpen.tactile.pattern import TactilePattern
 
@@ -37,18 +44,20 @@ LIMITS = (
 )
 
 
-def mono_samples(pattern: TactilePattern, rate: int | None = None, repeats: int = 1
-                 ) -> tuple[np.ndarray, int]:
-    """The tactile pattern, ``repeats`` periods, at ``rate`` Hz (default: its own rate).
+def mono_samples(pattern: TactilePattern, rate: int | None = None, repeats: int = 1,
+                 name: str = "pattern") -> tuple[np.ndarray, int]:
+    """The tactile pattern, ``repeats`` periods, at ``rate`` Hz (default: its own rate);
+    ``name`` names the pen in an error.
 
     Returns:
         ``(samples, rate)``: float32, shape (frames,), full scale ±1.
     """
     pattern = check_pattern(pattern)
-    repeats = check_repeats(repeats)
+    repeats = check_span(pattern, repeats, name)
     own = pattern.rate
     rate = own if rate is None else rate
     period = resample_loop(pattern.samples, own, rate, "tactile pattern")
+    check_frames(len(period), repeats, int(rate))
     return np.tile(period, repeats).astype(np.float32), int(rate)
 
 
@@ -71,7 +80,7 @@ def stereo_samples(pattern: TactilePattern, sound, rate: int | None = None, repe
         RealPenError: the two loops have no common length under :data:`MAX_COMMON_S`.
     """
     pattern = check_pattern(pattern)
-    repeats = check_repeats(repeats)
+    repeats = check_span(pattern, repeats, name)
     loop, sound_rate = sound_samples(sound, "a stereo WAV (sound left, tactile right)")
     rate = sound_rate if rate is None else rate
     tactile = resample_loop(pattern.samples, pattern.rate, rate, "tactile pattern")
@@ -82,6 +91,7 @@ def stereo_samples(pattern: TactilePattern, sound, rate: int | None = None, repe
             f"{name}: the sound loop ({len(loop) / rate * 1000:g} ms) and the tactile "
             f"loop ({len(tactile) / rate * 1000:g} ms) have no common length under "
             f"{MAX_COMMON_S:g} s, so a stereo file could not loop seamlessly")
+    check_frames(common, repeats, int(rate))
     both = np.column_stack([np.tile(loop, common // len(loop)),
                             np.tile(tactile, common // len(tactile))])
     return np.tile(both, (repeats, 1)).astype(np.float32), int(rate)
@@ -104,7 +114,7 @@ def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "p
     if stereo:
         samples, out_rate = stereo_samples(pattern, sound, rate, repeats, name)
     else:
-        samples, out_rate = mono_samples(pattern, rate, repeats)
+        samples, out_rate = mono_samples(pattern, rate, repeats, name)
     seconds = len(samples) / out_rate
     layout = "sound left, tactile right" if stereo else "tactile pattern, mono"
     limits = LIMITS if stereo else LIMITS[:1]

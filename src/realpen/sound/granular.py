@@ -23,12 +23,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
+from realpen.dsp.limits import MAX_SEED
 from realpen.errors import ParameterError, fail
 from realpen.io.recording import Recording
 from realpen.sound.loop import (
     DEFAULT_RATE,
     EDGE_MS,
     HOP_MS,
+    MAX_MS,
     REFERENCE_DBFS,
     SILENCE_DB,
     SoundLoop,
@@ -43,15 +45,16 @@ from realpen.sound.loop import (
     seam_report,
 )
 
-__all__ = ["SteadyPart", "steady_part", "grain_samples", "granular", "granular_loop",
+__all__ = ["SteadyPart", "steady_part", "check_seed", "grain_samples", "granular", "granular_loop",
            "GRAIN_MS", "LENGTH_MS", "MAX_LENGTH_MS", "STEADY_DB", "LEVEL_SMOOTH_MS"]
 
 GRAIN_MS = 50.0
 LENGTH_MS = 3000.0
-MAX_LENGTH_MS = 60000.0  # longest texture: 60 s (23 MB at 48 kHz); a loop need not be longer
+MAX_LENGTH_MS = MAX_MS  # longest texture: 60 s (23 MB at 48 kHz); a loop need not be longer
 STEADY_DB = 6.0
 LEVEL_SMOOTH_MS = 100.0
-_BLOCK = 1024  # grains rendered at once
+_BLOCK = 1024  # grains rendered at once, at most
+_BLOCK_VALUES = 2**22  # grain samples rendered at once (32 MiB per array), however long a grain
 
 
 @dataclass(frozen=True, repr=False, eq=False)
@@ -92,7 +95,7 @@ def steady_part(x: np.ndarray, rate: float, span_ms: float, tolerance_db: float 
     """
     x = np.asarray(x, dtype=np.float64)
     check_rate(rate)
-    check_ms("span_ms", span_ms)
+    check_ms("span_ms", span_ms, maximum=None)  # from a checked grain: up to rate_max × grain
     require_sound(x, source)
     block = max(1, int(HOP_MS * rate / 1000))
     span = int(np.ceil(span_ms * rate / 1000))
@@ -125,6 +128,19 @@ def steady_part(x: np.ndarray, rate: float, span_ms: float, tolerance_db: float 
     covered = np.concatenate([x[a:b] for a, b in stretches])
     return SteadyPart(starts=allowed * block, span=span, stretches=stretches,
                       rms=float(np.sqrt(np.mean(covered ** 2))))
+
+
+def check_seed(seed: int) -> int:
+    """``seed`` (of the random grain offsets) as an int from 0 to
+    :data:`~realpen.dsp.limits.MAX_SEED`.
+
+    Raises:
+        ParameterError: (parameter ``seed``) otherwise.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
+            or not 0 <= seed <= MAX_SEED:
+        raise ParameterError("seed", f"must be a whole number from 0 to {MAX_SEED}, got {seed!r}")
+    return int(seed)
 
 
 def grain_samples(grain_ms: float, rate: float) -> int:
@@ -174,15 +190,15 @@ def granular(x: np.ndarray, rate: float, frames: int, part: SteadyPart,
         rates = np.asarray(playback_rate, dtype=np.float64)[centres]
     if np.any(rates * (grain - 1) + 1 >= part.span):
         raise ParameterError("playback_rate", "too high for the steady part's span")
-    if seed < 0:
-        raise ParameterError("seed", f"must be >= 0, got {seed}")
+    check_seed(seed)
     rng = np.random.default_rng(seed)
     offsets = rng.choice(part.starts, size=len(positions))
     window = np.sin(np.pi * (np.arange(grain) + 0.5) / grain)
     out = np.zeros(frames + 2 * grain)
     steps = np.arange(grain)
-    for block in range(0, len(positions), _BLOCK):
-        chunk = slice(block, block + _BLOCK)
+    per_block = max(1, min(_BLOCK, _BLOCK_VALUES // grain))
+    for block in range(0, len(positions), per_block):
+        chunk = slice(block, block + per_block)
         read = offsets[chunk, None] + rates[chunk, None] * steps
         whole = np.floor(read).astype(np.int64)
         frac = read - whole
@@ -253,14 +269,19 @@ def granular_loop(sound: Recording | np.ndarray | SoundLoop | str | os.PathLike,
     check_ms("length_ms", length_ms)
     check_level(level_dbfs)
     hop = grain_samples(grain_ms, rate) // 2
+    if 2 * grain_ms > MAX_LENGTH_MS:  # no texture could hold two grains: the grain is wrong
+        raise ParameterError("grain_ms", f"must be at most {MAX_LENGTH_MS / 2:g} ms (a texture "
+                                         f"holds two grains or more, and lasts at most "
+                                         f"{MAX_LENGTH_MS:g} ms), got {grain_ms:g}")
     shortest = max(3 * EDGE_MS, 2 * grain_ms)
     if length_ms < shortest:
-        raise ParameterError("length_ms", f"must be at least {shortest:g} ms, got {length_ms:g}")
+        raise ParameterError("length_ms", f"must be at least {shortest:g} ms (two "
+                                          f"{grain_ms:g} ms grains, and three {EDGE_MS:g} ms "
+                                          f"frames to judge the seam), got {length_ms:g}")
     if length_ms > MAX_LENGTH_MS:
         raise ParameterError("length_ms", f"must be at most {MAX_LENGTH_MS:g} ms "
                                           f"({MAX_LENGTH_MS / 1000:g} s), got {length_ms:g}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ParameterError("seed", f"must be a whole number >= 0, got {seed!r}")
+    check_seed(seed)
     frames = max(1, int(round(length_ms * rate / 1000 / hop))) * hop
     part = steady_part(x, rate, (grain_samples(grain_ms, rate) + 2) * 1000 / rate, source=name)
     texture = granular(x, rate, frames, part, grain_ms, seed, circular=True)

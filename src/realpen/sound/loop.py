@@ -36,7 +36,8 @@ WAV file that declares its loop in a ``smpl`` chunk (as ``realpen sound loop`` w
 :func:`load_sound`). Stroke rendering, profiles and exports all take it.
 
 Limits, checked wherever a value is taken: rates from ``MIN_RATE`` (8 kHz: the bands need room
-between 100 Hz and 0.45 × rate) to ``MAX_RATE`` (384 kHz); lengths in ms finite and positive; a
+between 100 Hz and 0.45 × rate) to ``MAX_RATE`` (384 kHz); lengths in ms finite, positive and
+at most ``MAX_MS`` (a minute); a
 loop level (RMS, dBFS) finite and at most 0 dBFS. A bad argument raises
 :class:`~realpen.errors.ParameterError` naming the Python parameter (``unit_ms``, ``rate``,
 ``level_dbfs``, ...); bad data (a file, a recording that is silent — digital silence or a
@@ -69,7 +70,8 @@ __all__ = [
     "scan_windows", "make_loop", "crossfade_gains", "band_levels_db", "normalise", "level_db",
     "require_sound", "samples_for", "check_ms", "check_rate", "check_level", "ProgressCallback",
     "DEFAULT_RATE", "UNIT_MS", "CROSSFADE_MS", "EDGE_MS", "HOP_MS", "SILENCE_DB", "SILENT_DBFS",
-    "REFERENCE_DBFS", "MAX_LEVEL_DBFS", "MIN_RATE", "MAX_RATE", "FLOOR_DB", "BANDS", "WEIGHTS",
+    "REFERENCE_DBFS", "MAX_LEVEL_DBFS", "MIN_RATE", "MAX_RATE", "MAX_MS", "FLOOR_DB", "BANDS",
+    "WEIGHTS",
     "MODES",
 ]
 
@@ -85,6 +87,9 @@ MAX_LEVEL_DBFS = 0.0    # highest loop level (RMS) accepted
 MIN_RATE = 8000.0       # Hz; below it the 100 Hz–0.45·rate bands of the seam measures collapse
 MAX_RATE = 384000.0     # Hz; the highest common audio rate
 FLOOR_DB = 80.0         # band levels further below the loud frames are treated as equal
+MAX_MS = 60000.0
+"""The longest length (ms) a loop unit, crossfade, grain or texture may have: a minute. Every
+length is checked against it (:func:`check_ms`) before any array is sized by it."""
 BANDS = (24, 100.0, 16000.0)
 WEIGHTS = {"level_jump_db": 3.0, "spectral_db": 1.0, "stationarity_db": 1.0,
            "quietness_db": 1.0}
@@ -104,19 +109,24 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
 
 
-def check_ms(parameter: str, value: float) -> float:
+def check_ms(parameter: str, value: float, maximum: float | None = MAX_MS) -> float:
     """Return ``value`` (a length in ms) as float.
 
     Args:
         parameter: the Python parameter that gave it, e.g. ``"unit_ms"``, for the message.
         value: the length in ms.
+        maximum: the longest length accepted in ms (default :data:`MAX_MS`; None: no limit,
+            for lengths computed from checked ones).
 
     Raises:
-        ParameterError: ``value`` is not a finite number of ms above 0.
+        ParameterError: ``value`` is not a finite number of ms above 0, or above ``maximum``.
     """
     if not _is_number(value) or not np.isfinite(value) or value <= 0:
         shown = f"{value:g}" if _is_number(value) else repr(value)
         raise ParameterError(parameter, f"must be a finite number of ms above 0, got {shown}")
+    if maximum is not None and value > maximum:
+        raise ParameterError(parameter, f"must be at most {maximum:g} ms "
+                                        f"({maximum / 1000:g} s), got {value:g}")
     return float(value)
 
 
@@ -556,12 +566,14 @@ def _check_lengths(unit_ms, crossfade_ms, edge_ms, length, fade, edge) -> None:
     if fade <= 0:
         raise ParameterError("crossfade_ms", f"must last at least one sample, got "
                                              f"{crossfade_ms:g}")
-    if fade >= length:
-        raise ParameterError("crossfade_ms", f"must be between 0 and the unit length "
-                                             f"({unit_ms:g} ms), got {crossfade_ms:g}")
+    # The unit's own floor first: a crossfade longer than a unit that is too short anyway is
+    # not what the user should change.
     if 3 * edge > length:
         raise ParameterError("unit_ms", f"must be at least {3 * edge_ms:g} ms so head and tail "
                                         f"({edge_ms:g} ms each) can be compared, got {unit_ms:g}")
+    if fade >= length:
+        raise ParameterError("crossfade_ms", f"must be between 0 and the unit length "
+                                             f"({unit_ms:g} ms), got {crossfade_ms:g}")
 
 
 def _edges(x, rate, starts, length, fade, edge, rho, compensate, floor, progress):

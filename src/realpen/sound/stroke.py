@@ -51,7 +51,14 @@ from realpen.io.strokes import (
     StrokeSample,
 )
 from realpen.sound.coupling import Coupling
-from realpen.sound.granular import GRAIN_MS, SteadyPart, grain_samples, granular, steady_part
+from realpen.sound.granular import (
+    GRAIN_MS,
+    SteadyPart,
+    check_seed,
+    grain_samples,
+    granular,
+    steady_part,
+)
 from realpen.sound.loop import (
     CROSSFADE_MS,
     MODES,
@@ -70,10 +77,15 @@ from realpen.sound.loop import (
     samples_for,
 )
 
-__all__ = ["Trajectory", "Rendered", "load_trajectory", "control_signals", "render_stroke",
-           "MODES", "MAX_DURATION_S", "SPEED_WINDOW_MS", "TILT_FIELDS"]
+__all__ = ["Trajectory", "Rendered", "load_trajectory", "control_signals", "render_frames",
+           "render_stroke", "MODES", "MAX_DURATION_S", "MAX_RENDER_FRAMES", "SPEED_WINDOW_MS",
+           "TILT_FIELDS"]
 
 MAX_DURATION_S = 600.0  # longer usually means t was given in ms
+MAX_RENDER_FRAMES = 2**25
+"""The most samples a rendered stroke may have (33 554 432: 11.6 min at 48 kHz, 87 s at
+384 kHz). The render holds about eight arrays of that length (268 MB each as float64), so it
+is checked before any of them is made."""
 SPEED_WINDOW_MS = 20.0  # the live page's speed window (SPEED_WINDOW_MS in live/static/pen.js)
 TILT_FIELDS = ("tilt_x", "tilt_y")  # optional trajectory columns, degrees
 
@@ -243,6 +255,13 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
                               tilt_y=columns.get("tilt_y"))
 
 
+def render_frames(trajectory: Trajectory, coupling: Coupling, rate: float) -> int:
+    """Samples of a stroke's render at ``rate`` Hz: the stroke plus five smoothing time
+    constants (at least one sample)."""
+    tail = int(np.ceil(5 * coupling.smoothing_ms / 1000 * rate))
+    return int(np.floor(trajectory.duration_s * rate)) + 1 + max(tail, 1)
+
+
 def control_signals(trajectory: Trajectory, coupling: Coupling,
                     rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-sample gain and playback rate of a stroke, as the live app computes them.
@@ -259,8 +278,7 @@ def control_signals(trajectory: Trajectory, coupling: Coupling,
         source samples per output sample (1 = as recorded).
     """
     times = trajectory.t - trajectory.t[0]
-    tail = int(np.ceil(5 * coupling.smoothing_ms / 1000 * rate))
-    frames = int(np.floor(times[-1] * rate)) + 1 + max(tail, 1)
+    frames = render_frames(trajectory, coupling, rate)
     clock = np.arange(frames) / rate
     event = np.searchsorted(times, clock, side="right") - 1
     ended = clock > times[-1]
@@ -331,8 +349,9 @@ def render_stroke(sound: np.ndarray | Recording | SoundLoop, rate: float | None,
         progress: passed to the loop-unit search.
 
     Raises:
-        ParameterError: a bad mode, rate, length or level; ``find_unit`` for a recording shorter
-            than the unit plus the crossfade (the message names the sound).
+        ParameterError: a bad mode, rate, length, level or seed; ``find_unit`` for a recording
+            shorter than the unit plus the crossfade (the message names the sound); a render
+            longer than :data:`MAX_RENDER_FRAMES` samples (parameter ``rate``).
         RealPenError: silence, or a sound too short for the grains.
     """
     coupling = coupling or Coupling()
@@ -344,6 +363,7 @@ def render_stroke(sound: np.ndarray | Recording | SoundLoop, rate: float | None,
                         ("grain_ms", grain_ms)):
         check_ms(name, value)
     check_level(level_dbfs)
+    check_seed(seed)
     ready = None
     if isinstance(sound, SoundLoop):
         rate = _own_rate(sound, rate)
@@ -354,6 +374,11 @@ def render_stroke(sound: np.ndarray | Recording | SoundLoop, rate: float | None,
         sound, rate, _, source = _mono(sound, rate, source)
         if source == "signal":
             source = "sound"
+    frames = render_frames(trajectory, coupling, rate)
+    if frames > MAX_RENDER_FRAMES:
+        raise ParameterError("rate", f"a {trajectory.duration_s:g} s stroke at {rate:g} Hz is "
+                                     f"{frames:,} samples; a render holds at most "
+                                     f"{MAX_RENDER_FRAMES:,} (a lower rate or a shorter stroke)")
     require_sound(sound, source)
     needed = samples_for(unit_ms, rate) + samples_for(crossfade_ms, rate)
     search = mode == "loop" and ready is None and find_unit

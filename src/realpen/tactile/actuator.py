@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from realpen.dsp.limits import MAX_CAP_DB
 from realpen.errors import ParameterError, fail, require_number
 
 __all__ = ["Actuator", "Weighting", "MODEL_DEFAULTS", "KINDS", "parse_actuator", "as_actuator",
@@ -204,6 +205,9 @@ def parse_actuator(spec: str) -> Actuator:
         RealPenError: a malformed measured CSV (naming the file).
     """
     spec = spec.strip()
+    if not spec:  # as a path it would be the current folder
+        raise ParameterError("actuator", "is empty (use lra:f0=..,q=.., piezo:f0=..,q=.., flat, "
+                                         "or a CSV of a measured response)")
     name, _, arguments = spec.partition(":")
     if name in MODEL_DEFAULTS:
         params = dict(MODEL_DEFAULTS[name])
@@ -254,7 +258,10 @@ def load_measured(path: str | Path) -> Actuator:
     if not np.all(np.diff(hz) > 0):
         raise fail(path, "frequencies are not strictly increasing")
     if in_db:
-        response = 10 ** (response / 20)
+        with np.errstate(over="ignore"):
+            response = 10 ** (response / 20)
+        if not np.all(np.isfinite(response)):
+            raise fail(path, "response levels in dB too high to be a magnitude")
     if np.any(response <= 0):
         raise fail(path, "response magnitudes must be positive (give dB in a column named dB)")
     return Actuator(str(path), "measured", {"sha256": sha256_of(path)}, hz, response)
@@ -271,10 +278,11 @@ def weighting(actuator: Actuator, frequencies_hz: np.ndarray, band_hz: tuple[flo
         cap_db: largest boost in dB over the best-responding frequency.
 
     Raises:
-        ParameterError: a negative or non-finite ``cap_db``.
+        ParameterError: a ``cap_db`` that is negative, not finite or above
+            :data:`~realpen.dsp.limits.MAX_CAP_DB`.
     """
     actuator = as_actuator(actuator)
-    require_number("cap_db", cap_db, minimum=0.0)
+    require_number("cap_db", cap_db, minimum=0.0, maximum=MAX_CAP_DB)
     low, high = max(band_hz[0], 1e-3), max(band_hz[1], band_hz[0] * 1.001)
     grid = np.geomspace(low, high, 2048)
     # The grid alone can miss the exact peak; add the points where a peak can be.

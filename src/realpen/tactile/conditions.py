@@ -18,8 +18,10 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
 
+from realpen.dsp.limits import MAX_CAP_DB, MAX_SEED, MAX_SUBPATTERNS, MAX_TOP, MAX_UNIT_MS
 from realpen.errors import ParameterError, require_choice, require_number
-from realpen.tactile.synthesis import BOUNDARIES, check_rate
+from realpen.io.limits import MAX_RATE_HZ, MIN_RATE_HZ
+from realpen.tactile.synthesis import BOUNDARIES, check_frames, check_rate, subpattern_samples
 
 __all__ = ["CONDITIONS", "SELECTION_UNIT_MS", "AMPLITUDE_MODES", "SELECTIONS", "TactileParams"]
 
@@ -32,6 +34,7 @@ SELECTION_UNIT_MS = 100.0  # the unit sequence every condition's stretch is chos
 AMPLITUDE_MODES = ("sqrt", "power")
 SELECTIONS = ("stationary", "middle")
 _COUNTS = ("top", "subpatterns", "unit_ms")
+_MAXIMA = {"top": MAX_TOP, "subpatterns": MAX_SUBPATTERNS, "unit_ms": MAX_UNIT_MS}
 
 
 @dataclass(frozen=True, repr=False)
@@ -68,7 +71,11 @@ class TactileParams:
         realpen.errors.ParameterError: top: condition D sets 5, not 10 (give the condition or the counts)
 
     Raises:
-        ParameterError: any bad value, named by its parameter.
+        ParameterError: any bad value, named by its parameter. Values that size the pattern or
+            its analysis are checked against their limits (:mod:`realpen.dsp.limits`: ``top``,
+            ``subpatterns``, ``unit_ms``, ``seed``, ``cap_db``; ``rate`` and the loop's length
+            in samples, :mod:`realpen.tactile.synthesis`; ``analysis_rate``,
+            :mod:`realpen.io.limits`) before anything is computed.
     """
 
     top: int | None = None
@@ -104,9 +111,9 @@ class TactileParams:
                 object.__setattr__(self, name, preset[name])
                 continue
             if name == "unit_ms":
-                require_number(name, value, minimum=0.0, inclusive=False)
+                require_number(name, value, minimum=0.0, inclusive=False, maximum=MAX_UNIT_MS)
             else:
-                require_number(name, value, minimum=1)
+                require_number(name, value, minimum=1, maximum=_MAXIMA[name])
             if condition is not None and value != preset[name]:
                 raise ParameterError(name, f"condition {condition} sets {preset[name]:g}, "
                                            f"not {value:g} (give the condition or the counts)")
@@ -135,18 +142,30 @@ class TactileParams:
                                                       f"multiple of it, got "
                                                       f"{self.selection_unit_ms:g}")
         object.__setattr__(self, "rate", check_rate(self.rate))
+        if subpattern_samples(self.rate, self.unit_ms) < 1:
+            # Said here: the crossfade, checked next against the unit, is not what is wrong.
+            raise ParameterError("unit_ms", f"{self.unit_ms:g} ms is less than one sample at "
+                                            f"{self.rate} Hz")
+        check_frames(self.subpatterns, self.rate, self.unit_ms,
+                     "subpatterns" if self.subpatterns > 1 else "unit_ms")
         require_choice("boundary", self.boundary, BOUNDARIES)
         require_choice("amplitude", self.amplitude, AMPLITUDE_MODES)
         require_choice("selection", self.selection, SELECTIONS)
-        require_number("crossfade_ms", self.crossfade_ms, minimum=0.0, maximum=self.unit_ms)
-        require_number("cap_db", self.cap_db, minimum=0.0)
+        require_number("crossfade_ms", self.crossfade_ms, minimum=0.0)
+        if self.crossfade_ms > self.unit_ms:
+            raise ParameterError("crossfade_ms", f"{self.crossfade_ms:g} ms is longer than the "
+                                                 f"{self.unit_ms:g} ms sub-pattern; shorten the "
+                                                 f"crossfade or lengthen the sub-pattern")
+        require_number("cap_db", self.cap_db, minimum=0.0, maximum=MAX_CAP_DB)
         require_number("headroom_db", self.headroom_db, minimum=0.0)
-        require_number("seed", self.seed, minimum=0)
+        require_number("seed", self.seed, minimum=0, maximum=MAX_SEED)
         require_number("highpass_hz", self.highpass_hz, minimum=0.0)
         if self.fmax_hz is not None:
             require_number("fmax_hz", self.fmax_hz, minimum=self.highpass_hz, inclusive=False)
-        if self.analysis_rate is not None:
+        if self.analysis_rate is not None:  # the limits of realpen.dsp.filters.resample
             require_number("analysis_rate", self.analysis_rate, minimum=0.0, inclusive=False)
+            require_number("analysis_rate", self.analysis_rate, minimum=MIN_RATE_HZ,
+                           maximum=MAX_RATE_HZ)
 
     def __repr__(self) -> str:
         shown = [f"condition={self.condition!r}"] if self.condition else []

@@ -30,12 +30,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from realpen.dsp.limits import MAX_SUBPATTERNS, MAX_TOP, MAX_UNIT_MS
 from realpen.errors import ParameterError, require_choice, require_number
 from realpen.tactile.actuator import Actuator
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.synthesis import (
     BOUNDARIES,
     MAX_RATE,
+    check_frames,
     check_rate,
     subpattern_samples,
     synthesize,
@@ -48,7 +50,7 @@ __all__ = ["Component", "TactilePattern", "canonical_json", "content_version", "
            "SIGNIFICANT_DIGITS", "MAX_SUBPATTERN_MS"]
 
 SIGNIFICANT_DIGITS = 9
-MAX_SUBPATTERN_MS = 60_000.0
+MAX_SUBPATTERN_MS = MAX_UNIT_MS  # ms; a sub-pattern is one analysed unit (or the D–F stretch)
 NOT_JSON = {"json": False}  # field metadata: not stored in profile.json
 
 
@@ -199,6 +201,11 @@ class TactilePattern:
     Only the first five fields are the pattern (``profile.json`` stores them; equality and
     :attr:`version` use them); the others say where it came from.
 
+    Limits (a :class:`~realpen.errors.ParameterError` otherwise, before anything is
+    synthesised): at most :data:`~realpen.dsp.limits.MAX_SUBPATTERNS` sub-patterns of at most
+    :data:`~realpen.dsp.limits.MAX_TOP` components, each at most :data:`MAX_SUBPATTERN_MS` ms,
+    and a loop of at most :data:`~realpen.tactile.synthesis.MAX_PATTERN_FRAMES` samples.
+
     Example:
         >>> pattern = TactilePattern([[Component(175.0, 0.5)], [Component(180.0, 0.4)]])
         >>> pattern
@@ -225,11 +232,17 @@ class TactilePattern:
         set_ = object.__setattr__
         if isinstance(self.subpatterns, (str, bytes, dict)) or not len(self.subpatterns):
             raise ParameterError("subpatterns", "needs at least one sub-pattern")
+        if len(self.subpatterns) > MAX_SUBPATTERNS:
+            raise ParameterError("subpatterns", f"{len(self.subpatterns):,} sub-patterns; a "
+                                                f"pattern holds at most {MAX_SUBPATTERNS}")
         subpatterns = []
         for index, sub in enumerate(self.subpatterns):
             if isinstance(sub, (str, bytes, dict)) or not len(sub):
                 raise ParameterError("subpatterns", f"sub-pattern {index} needs at least one "
                                                     f"component")
+            if len(sub) > MAX_TOP:
+                raise ParameterError("subpatterns", f"sub-pattern {index} has {len(sub):,} "
+                                                    f"components; the limit is {MAX_TOP}")
             subpatterns.append(tuple(Component.from_json(c) for c in sub))
         set_(self, "subpatterns", tuple(subpatterns))
         set_(self, "rate", check_rate(self.rate))
@@ -241,6 +254,7 @@ class TactilePattern:
         if subpattern_samples(self.rate, self.subpattern_ms) < 1:
             raise ParameterError("subpattern_ms", f"{self.subpattern_ms:g} ms is less than one "
                                                   f"sample at {self.rate} Hz")
+        check_frames(len(self.subpatterns), self.rate, self.subpattern_ms, "subpatterns")
         if self.actuator is not None and not isinstance(self.actuator, Actuator):
             raise ParameterError("actuator", f"must be an Actuator, got "
                                              f"{type(self.actuator).__name__}")

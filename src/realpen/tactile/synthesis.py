@@ -23,24 +23,50 @@ from collections.abc import Sequence
 import numpy as np
 
 from realpen.errors import ParameterError, require_choice, require_number
+from realpen.io.limits import MIN_RATE_HZ
 
-__all__ = ["BOUNDARIES", "MAX_RATE", "check_rate", "synthesize", "subpattern_samples", "fade_samples",
+__all__ = ["BOUNDARIES", "MIN_RATE", "MAX_RATE", "MAX_PATTERN_FRAMES", "check_rate",
+           "check_frames", "synthesize", "subpattern_samples", "fade_samples",
            "component_arrays"]
 
 BOUNDARIES = ("crossfade", "hard")
+MIN_RATE = MIN_RATE_HZ  # Hz; the lowest rate of any signal RealPen writes
 MAX_RATE = 384_000  # Hz; the highest common audio rate (a pattern is synthesised whole)
+MAX_PATTERN_FRAMES = 2**24
+"""The most samples in one loop of a tactile pattern (16 777 216: 35 min at 8 kHz, 44 s at
+384 kHz; 128 MiB as float64). The method's loop is 1.5 s, 12 000 samples at 8 kHz."""
+_BLOCK_VALUES = 2**22  # sinusoid values computed at once: 32 MiB, however many components
 
 
 def check_rate(rate: float) -> int:
-    """``rate`` as a whole number of Hz, above 0 and at most :data:`MAX_RATE`.
+    """``rate`` as a whole number of Hz, from :data:`MIN_RATE` to :data:`MAX_RATE`.
 
     Raises:
         ParameterError: (parameter ``rate``) otherwise.
     """
-    require_number("rate", rate, minimum=0.0, inclusive=False, maximum=MAX_RATE)
+    require_number("rate", rate, minimum=MIN_RATE, maximum=MAX_RATE)
     if int(rate) != rate:
         raise ParameterError("rate", f"must be a whole number of Hz, got {rate:g}")
     return int(rate)
+
+
+def check_frames(count: int, rate: float, subpattern_ms: float, parameter: str = "rate") -> int:
+    """Samples in a loop of ``count`` sub-patterns of ``subpattern_ms`` ms at ``rate`` Hz,
+    checked against :data:`MAX_PATTERN_FRAMES` before anything is synthesised.
+
+    Args:
+        parameter: the parameter to name when the loop is too long.
+
+    Raises:
+        ParameterError: (named ``parameter``) a loop longer than :data:`MAX_PATTERN_FRAMES`.
+    """
+    frames = subpattern_samples(rate, subpattern_ms) * count
+    if frames > MAX_PATTERN_FRAMES:
+        raise ParameterError(parameter, f"{count} sub-pattern(s) of {subpattern_ms:g} ms at "
+                                        f"{rate:g} Hz make a loop of {frames:,} samples; a "
+                                        f"pattern holds at most {MAX_PATTERN_FRAMES:,} (fewer "
+                                        f"or shorter sub-patterns, or a lower rate)")
+    return frames
 
 
 def subpattern_samples(rate: float, subpattern_ms: float) -> int:
@@ -97,8 +123,9 @@ def synthesize(subpatterns: Sequence, rate: int, subpattern_ms: float,
         the amplitudes are.
 
     Raises:
-        ParameterError: a bad ``rate``, ``subpattern_ms``, ``boundary`` or ``crossfade_ms``, or
-            no sub-patterns.
+        ParameterError: a bad ``rate``, ``subpattern_ms``, ``boundary`` or ``crossfade_ms``, no
+            sub-patterns, or a loop longer than :data:`MAX_PATTERN_FRAMES` samples (parameter
+            ``rate``).
 
     Example:
         >>> x = synthesize([([100.0], [0.5], [0.0])], 8000, 100, boundary="hard")
@@ -115,7 +142,7 @@ def synthesize(subpatterns: Sequence, rate: int, subpattern_ms: float,
     if length < 1:
         raise ParameterError("subpattern_ms", f"{subpattern_ms:g} ms is less than one sample at "
                                               f"{rate:g} Hz")
-    total = length * len(subpatterns)
+    total = check_frames(len(subpatterns), rate, subpattern_ms)
     fade = fade_samples(rate, subpattern_ms, boundary, crossfade_ms)
     out = np.zeros(total)
     local = (np.arange(length + fade) - fade // 2) / rate
@@ -125,10 +152,18 @@ def synthesize(subpatterns: Sequence, rate: int, subpattern_ms: float,
         freqs, amps, phases, joins_previous, joins_next = component_arrays(sub)
         if not len(freqs):
             continue
-        waves = amps[:, None] * np.sin(2 * np.pi * freqs[:, None] * local[None, :] + phases[:, None])
-        if fade:
-            waves[:, :fade] *= np.where(joins_previous[:, None], linear_in, power_in)
-            waves[:, -fade:] *= np.where(joins_next[:, None], linear_in[::-1], power_in[::-1])
+        summed = np.zeros(length + fade)
+        # Components in blocks: memory stays a few sub-patterns long however many there are.
+        step = max(1, _BLOCK_VALUES // (length + fade))
+        for first in range(0, len(freqs), step):
+            part = slice(first, first + step)
+            waves = amps[part, None] * np.sin(2 * np.pi * freqs[part, None] * local[None, :]
+                                              + phases[part, None])
+            if fade:
+                waves[:, :fade] *= np.where(joins_previous[part, None], linear_in, power_in)
+                waves[:, -fade:] *= np.where(joins_next[part, None], linear_in[::-1],
+                                             power_in[::-1])
+            summed += waves.sum(axis=0)
         positions = (index * length - fade // 2 + np.arange(length + fade)) % total
-        np.add.at(out, positions, waves.sum(axis=0))
+        np.add.at(out, positions, summed)
     return out
