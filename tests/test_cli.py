@@ -248,4 +248,4 @@ def test_integer_options_refuse_numbers_beyond_64_bits(digits):
 
     # The largest 64-bit number reaches the library, whose limit names the flag.
     result = run_cli("analyze", example_recording_path(), "--top", str(2 ** 63 - 1))
-    assert_clean_failure(result, "--top: must be <= 100, got 9.22337e+18")
+    assert_clean_failure(result, "--top: must be <= 100, got 9223372036854775807")

@@ -63,9 +63,11 @@ def require_number(parameter: str, value: float, minimum: float | None = None,
 
 
 def _shown(value: object) -> str:
-    """A value for a message: numbers as ``:g``; an integer too large for a float (or for
-    ``str``, past 4300 digits) by its size."""
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**17:
+    """A value for a message: floats as ``:g``, integers exactly; an integer of more than 30
+    digits (too large for a float, or for ``str`` past 4300 digits) by its size."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        if abs(value) < 10**30:
+            return str(value)
         digits = math.floor(value.bit_length() * math.log10(2)) + 1
         return f"an integer of about {digits} digits"
     if isinstance(value, (int, float)) and not isinstance(value, bool):

@@ -30,6 +30,15 @@ from scipy import signal
 
 from realpen.errors import ParameterError, fail, require_number
 from realpen.io.files import check_readable_file, sha256_of
+from realpen.io.limits import (
+    MAX_FRAMES,
+    MAX_MODEL_ORDER,
+    MAX_NUMBER_CHARS,
+    MAX_RATE_HZ,
+    MAX_XML_BYTES,
+    MIN_RATE_HZ,
+    check_size,
+)
 from realpen.io.recording import Recording
 
 __all__ = ["ArmaModel", "HattModelSet", "load_hatt", "synthesize", "lsf_to_poly", "MAX_DURATION_S"]
@@ -174,6 +183,7 @@ def _values(path: Path, node: ET.Element, tag: str, where: str = "", single: boo
     if child is None:
         raise fail(path, f"missing <{tag}>{where}")
     texts = [child.text or ""] if single else [v.text or "" for v in child.findall("value")]
+    _check_number_lengths(path, texts, f"<{tag}>{where}")
     try:
         values = np.array([float(t.strip()) for t in texts], dtype=np.float64)
     except ValueError as error:
@@ -181,6 +191,15 @@ def _values(path: Path, node: ET.Element, tag: str, where: str = "", single: boo
     if values.size == 0 or not np.all(np.isfinite(values)):
         raise fail(path, f"<{tag}>{where} holds no values or non-finite ones")
     return float(values[0]) if single else values
+
+
+def _check_number_lengths(path: Path, texts: list[str], what: str) -> None:
+    """Refuse a number written with more than ``MAX_NUMBER_CHARS`` characters: int() of
+    thousands of digits is refused by Python itself (and slow before that)."""
+    longest = max((len(text.strip()) for text in texts), default=0)
+    if longest > MAX_NUMBER_CHARS:
+        raise fail(path, f"{what} holds a number of {longest:,} characters; numbers are limited "
+                         f"to {MAX_NUMBER_CHARS}")
 
 
 def _load_model(path: Path, node: ET.Element, where: str) -> ArmaModel:
@@ -192,6 +211,9 @@ def _load_model(path: Path, node: ET.Element, where: str) -> ArmaModel:
     ma = _values(path, node, "MAcoeff", where) if has_ma else np.ones(1)
     ma_lsf = _values(path, node, "MAlsf", where) if has_ma else np.zeros(0)
     for name, poly, lsf in (("AR", ar, ar_lsf), ("MA", ma, ma_lsf)):
+        if len(poly) - 1 > MAX_MODEL_ORDER:  # before any root finding, which costs order³
+            raise fail(path, f"{name} order{where} is {len(poly) - 1}; models are limited to "
+                             f"order {MAX_MODEL_ORDER}")
         if poly[0] != 1.0 or len(lsf) != len(poly) - 1:
             raise fail(path, f"{name} coefficients{where} must start with 1.0 and have one more "
                              f"value than the {len(lsf)} {name} LSFs")
@@ -210,10 +232,14 @@ def load_hatt(path: str | os.PathLike) -> HattModelSet:
     Raises:
         RealPenError: missing, empty or non-XML files, missing fields, non-numeric values,
             inconsistent counts (models, speeds, forces, triangles, orders), triangle indices
-            outside 1..numMod, degenerate triangles, disordered LSFs.
+            outside 1..numMod, degenerate triangles, disordered LSFs; a file over
+            ``MAX_XML_BYTES``, a ``<SampleRate>`` outside ``MIN_RATE_HZ``..``MAX_RATE_HZ``, an
+            order over ``MAX_MODEL_ORDER``, a number over ``MAX_NUMBER_CHARS`` characters
+            (limits of :mod:`realpen.io.limits`).
     """
     path = Path(path)
     check_readable_file(path)
+    check_size(path, MAX_XML_BYTES, "XML model files")
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as error:
@@ -226,6 +252,9 @@ def load_hatt(path: str | os.PathLike) -> HattModelSet:
     rate, count = number("SampleRate"), number("numMod")
     if rate <= 0 or count < 3 or count != int(count):
         raise fail(path, "needs a positive <SampleRate> and an integer <numMod> ≥ 3")
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+        raise fail(path, f"<SampleRate> {rate:g} Hz is outside the {MIN_RATE_HZ:,}–"
+                         f"{MAX_RATE_HZ:,} Hz RealPen reads")
     speeds, forces = _values(path, root, "speedList"), _values(path, root, "forceList")
     nodes = root.findall("model")
     if not len(speeds) == len(forces) == len(nodes) == int(count):
@@ -242,6 +271,7 @@ def load_hatt(path: str | os.PathLike) -> HattModelSet:
     tris = [[(v.text or "").strip() for v in t.findall("value")] for t in root.findall("tri")]
     if not tris or any(len(t) != 3 for t in tris):
         raise fail(path, "needs <tri> elements of exactly 3 vertex indices each")
+    _check_number_lengths(path, [v for t in tris for v in t], "<tri>")
     try:
         triangles = np.array([[int(v) for v in t] for t in tris], dtype=np.int64)
     except ValueError as error:
@@ -281,8 +311,9 @@ def synthesize(model_set: HattModelSet, speed_mm_s: float | np.ndarray, force_n:
         stationary from its first sample (a filter warm-up is discarded).
 
     Raises:
-        ParameterError: a ``duration_s`` shorter than one sample or longer than
-            :data:`MAX_DURATION_S`, a negative or non-integer
+        ParameterError: a ``duration_s`` shorter than one sample, longer than
+            :data:`MAX_DURATION_S` or of more than ``MAX_FRAMES`` samples at the set's rate
+            (:mod:`realpen.io.limits`), a negative or non-integer
             ``seed``, a non-positive ``update_s``, or a speed or force that is not finite or
             not one number per output sample.
     """
@@ -292,6 +323,9 @@ def synthesize(model_set: HattModelSet, speed_mm_s: float | np.ndarray, force_n:
     if frames < 1:
         raise ParameterError("duration_s", f"must give at least one sample at "
                                            f"{model_set.rate:g} Hz, got {duration_s:g} s")
+    if frames > MAX_FRAMES:
+        raise ParameterError("duration_s", f"gives {frames:,} samples at {model_set.rate:g} Hz; "
+                                           f"recordings are limited to {MAX_FRAMES:,}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError("seed", f"must be a whole number >= 0, got {seed!r}")
     require_number("update_s", update_s, minimum=0.0, inclusive=False)

@@ -13,13 +13,19 @@ What it accepts:
 Every value read must be a finite number. Every problem with the file becomes one
 :class:`~realpen.errors.RealPenError` naming the file and, for a row, its line as an editor
 counts it (the first line is line 1, blank lines count).
+
+Limits (:mod:`realpen.io.limits`): the file is at most ``MAX_CSV_BYTES``, a line at most
+``MAX_CSV_LINE_CHARS`` and a field at most ``MAX_CSV_FIELD_CHARS`` characters, and at most
+``MAX_FRAMES`` numbers are kept. The file is read line by line into preallocated arrays, so
+memory stays near 8 bytes a value kept, whatever the file holds.
 """
 
 from __future__ import annotations
 
 import csv
+import itertools
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,11 +33,21 @@ import numpy as np
 
 from realpen.errors import ParameterError, fail
 from realpen.io.files import check_readable_file
+from realpen.io.limits import (
+    MAX_CSV_BYTES,
+    MAX_CSV_FIELD_CHARS,
+    MAX_CSV_LINE_CHARS,
+    MAX_FRAMES,
+    check_size,
+)
 
 __all__ = ["Table", "read_csv", "is_number", "DELIMITERS", "SNIFF_ROWS"]
 
 DELIMITERS = ",;\t "
 SNIFF_ROWS = 20
+SNIFF_CHARS = 4096  # csv.Sniffer's quote search grows faster than the square of its sample
+_FLUSH_CELLS = 1 << 15  # cells held as text before they are converted into the arrays
+_SHOWN_CHARS = 40  # a cell quoted in a message is cut to this many characters
 
 
 @dataclass(frozen=True, repr=False)
@@ -103,7 +119,8 @@ def read_csv(path: str | os.PathLike, columns: Sequence[str | int] | None = None
 
     Raises:
         RealPenError: missing, empty, binary or blank file; a missing header or column;
-            ragged rows; non-numeric, NaN or infinite values; fewer than ``min_rows`` rows.
+            ragged rows; non-numeric, NaN or infinite values; fewer than ``min_rows`` rows;
+            a file, line, field or table over its limit (see the module doc).
         ParameterError: ``min_rows`` below 0, or ``header`` not True, None or False.
 
     Example:
@@ -119,16 +136,39 @@ def read_csv(path: str | os.PathLike, columns: Sequence[str | int] | None = None
     if header not in (True, None, False):
         raise ParameterError("header", f"must be True, None or False, got {header!r}")
     path = Path(path)
-    numbered = _lines(path)
-    delimiter = _sniff(line for _, line in numbered[:SNIFF_ROWS])
-    rows: list[tuple[int, list[str]]] = []
+    check_readable_file(path)
+    check_size(path, MAX_CSV_BYTES, "CSV files")
+    capacity = _line_breaks(path) + 1  # at least the rows there are: arrays sized once
     try:
-        for row in csv.reader((line for _, line in numbered), delimiter=delimiter):
-            rows.append((numbered[len(rows)][0], [cell.strip() for cell in row]))
-    except csv.Error as error:
-        raise fail(path, f"line {numbered[len(rows)][0]}: not a CSV row ({error})") from None
-    hint = f" ({row_hint})" if row_hint else ""
-    first_line, first = rows[0]
+        with open(path, encoding="utf-8-sig") as handle:  # universal newlines, as an editor
+            return _read_rows(path, handle, capacity, columns, header, min_rows,
+                              f" ({row_hint})" if row_hint else "", optional)
+    except UnicodeDecodeError:
+        raise fail(path, "not a text CSV file") from None
+    except OSError as error:
+        raise fail(path, f"cannot read ({error.strerror or error})") from None
+
+
+def _read_rows(path: Path, handle, capacity: int, columns, header: bool | None, min_rows: int,
+               hint: str, optional: Sequence[str]) -> Table:
+    """The rows of an open CSV file, converted into arrays a block at a time."""
+    numbered = _lines(path, handle)
+    head = list(itertools.islice(numbered, SNIFF_ROWS))
+    if not head:
+        raise fail(path, "file holds only blank lines")
+    delimiter = _sniff(line for _, line in head)
+    # The number of the line being read (csv.reader does not count ours), and the characters
+    # of the row being read so far (a quoted field may span lines).
+    where = [head[0][0], 0]
+
+    def texts() -> Iterator[str]:
+        for number, line in itertools.chain(head, numbered):
+            where[0] = number
+            where[1] += len(line)
+            yield line
+
+    rows = _rows(path, csv.reader(texts(), delimiter=delimiter), where)
+    first_line, first = next(rows)
     if header is None:
         header = not is_number(first[0], delimiter != ",")
     if header:
@@ -136,35 +176,59 @@ def read_csv(path: str | os.PathLike, columns: Sequence[str | int] | None = None
             raise fail(path, f"line {first_line}: CSV needs a header row naming its columns "
                              f"(the first row is numbers)")
         names_in_file = tuple(first)
-        data = rows[1:]
     else:
         names_in_file = None
-        data = rows
-    width = len(names_in_file) if names_in_file is not None else len(data[0][1]) if data else 0
+        rows = itertools.chain([(first_line, first)], rows)
+    width = len(names_in_file) if names_in_file is not None else len(first)
     shown = names_in_file or tuple(f"column {index + 1}" for index in range(width))
     indices = _indices(path, columns, names_in_file, width, first_line, hint)
     if optional and columns is not None and names_in_file is not None:
         folded = [name.strip().lower() for name in names_in_file]
         indices += [folded.index(name.strip().lower()) for name in optional
                     if name.strip().lower() in folded]
-    if len(data) < min_rows:
-        raise fail(path, f"CSV needs at least {min_rows} data row(s), has {len(data)}"
-                         + (hint if header is False else ""))
-    for line_no, row in data:
+    # The row numbers count as values: rows × (columns + 1) numbers of 8 bytes at most.
+    limit = MAX_FRAMES // (len(indices) + 1)
+    values = np.empty((min(capacity, limit), len(indices)))
+    lines = np.empty(min(capacity, limit), dtype=np.int64)
+    what = "of the header" if names_in_file is not None else "of the first row"
+    count, comma = 0, False
+    # (line, the cells asked for) of rows read but not yet converted: only those cells are
+    # kept, so a wide row costs no more than a narrow one.
+    pending: list[tuple[int, list[str]]] = []
+    flush_rows = max(1, _FLUSH_CELLS // max(len(indices), 1))
+
+    def flush() -> None:
+        nonlocal count, comma
+        for position, index in enumerate(indices):
+            column, used_comma = _numbers(path, [cells[position] for _, cells in pending],
+                                          pending, shown[index], delimiter, hint)
+            values[count:count + len(pending), position] = column
+            comma = comma or used_comma
+        lines[count:count + len(pending)] = [number for number, _ in pending]
+        count += len(pending)
+        pending.clear()
+
+    for line_no, row in rows:
         if len(row) != width:
-            what = "of the header" if names_in_file is not None else "of the first row"
             raise fail(path, f"line {line_no}: {len(row)} values for the {width} columns "
                              f"{what}{hint}")
-    values = np.empty((len(data), len(indices)))
-    comma = False
-    for position, index in enumerate(indices):
-        cells = [row[index] for _, row in data]
-        column, used_comma = _numbers(path, cells, data, shown[index], delimiter, hint)
-        values[:, position] = column
-        comma = comma or used_comma
-    return Table(names=tuple(shown[index] for index in indices), values=values,
-                 lines=np.array([number for number, _ in data], dtype=np.int64),
-                 header=names_in_file, delimiter=delimiter, decimal_comma=comma, source=path)
+        if count + len(pending) == limit:
+            raise fail(path, f"line {line_no}: more than {limit:,} rows of {len(indices)} "
+                             f"column(s); CSV tables are limited to {MAX_FRAMES:,} numbers "
+                             f"(row numbers included; use WAV or NPZ for longer recordings)")
+        pending.append((line_no, [row[index] for index in indices]))
+        if len(pending) >= flush_rows:
+            flush()
+    if pending:
+        flush()
+    if count < min_rows:
+        raise fail(path, f"CSV needs at least {min_rows} data row(s), has {count}"
+                         + (hint if header is False else ""))
+    if count < len(values) // 2:  # mostly blank lines: do not keep the unused space alive
+        values, lines = values[:count].copy(), lines[:count].copy()
+    return Table(names=tuple(shown[index] for index in indices), values=values[:count],
+                 lines=lines[:count], header=names_in_file, delimiter=delimiter,
+                 decimal_comma=comma, source=path)
 
 
 def is_number(text: str, decimal_comma: bool = False) -> bool:
@@ -183,30 +247,74 @@ def is_number(text: str, decimal_comma: bool = False) -> bool:
     return True
 
 
-def _lines(path: Path) -> list[tuple[int, str]]:
-    """The file's non-blank lines with their 1-based numbers."""
-    check_readable_file(path)
+def _line_breaks(path: Path) -> int:
+    """How many line breaks (``\\n``, ``\\r\\n`` or ``\\r``) the file has, or a few more.
+
+    Counted on bytes, a block at a time, so that the arrays can be allocated once at their
+    final size; a ``\\r\\n`` split across two blocks counts twice, which only over-allocates.
+    """
+    breaks = 0
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            breaks += block.count(b"\n") + block.count(b"\r") - block.count(b"\r\n")
+    return breaks
+
+
+def _lines(path: Path, handle) -> Iterator[tuple[int, str]]:
+    """The file's non-blank lines with their 1-based numbers, each within the line limit.
+
+    ``readline`` is given the limit, so an over-long line is refused without being read whole.
+    """
+    number = 0
+    while line := handle.readline(MAX_CSV_LINE_CHARS + 1):
+        number += 1
+        text = line[:-1] if line.endswith("\n") else line
+        if len(text) > MAX_CSV_LINE_CHARS:
+            raise fail(path, f"line {number} is over {MAX_CSV_LINE_CHARS:,} characters long; "
+                             f"CSV lines are limited to {MAX_CSV_LINE_CHARS:,} characters and "
+                             f"fields to {MAX_CSV_FIELD_CHARS:,}")
+        if "\x00" in text:
+            raise fail(path, "not a text CSV file")
+        if text.strip():
+            yield number, text
+
+
+def _rows(path: Path, reader, where: list[int]) -> Iterator[tuple[int, list[str]]]:
+    """(line, stripped cells) of each CSV row, every field within ``MAX_CSV_FIELD_CHARS``.
+
+    ``where`` holds the number of the line just read (a row spanning lines, in quotes, is
+    named by its last line) and the characters read for this row.
+    """
     try:
-        text = path.read_text(encoding="utf-8-sig")  # universal newlines: \r\n and \r become \n
-    except UnicodeDecodeError:
-        raise fail(path, "not a text CSV file") from None
-    except OSError as error:
-        raise fail(path, f"cannot read ({error.strerror or error})") from None
-    if "\x00" in text:
-        raise fail(path, "not a text CSV file")
-    numbered = [(number, line) for number, line in enumerate(text.split("\n"), start=1)
-                if line.strip()]
-    if not numbered:
-        raise fail(path, "file holds only blank lines")
-    return numbered
+        for row in reader:
+            cells = [cell.strip() for cell in row]
+            if where[1] > MAX_CSV_FIELD_CHARS:  # only a longer row can hold a longer field
+                longest = max(len(cell) for cell in cells)
+                if longest > MAX_CSV_FIELD_CHARS:
+                    raise fail(path, f"line {where[0]}: a field of {longest:,} characters; CSV "
+                                     f"fields are limited to {MAX_CSV_FIELD_CHARS:,}")
+            where[1] = 0
+            yield where[0], cells
+    except csv.Error as error:
+        raise fail(path, f"line {where[0]}: not a CSV row ({error})") from None
 
 
 def _sniff(lines) -> str:
     """The delimiter of the sample lines: sniffed; when the rows are too irregular to tell, the
-    one of ``,``, ``;`` and tab the first row uses most (``,`` when it uses none)."""
-    lines = list(lines)
+    one of ``,``, ``;`` and tab the first row uses most (``,`` when it uses none).
+
+    The sniffer sees whole lines up to ``SNIFF_CHARS`` characters (at least the start of the
+    first line): on a long sample full of quotes it would take minutes.
+    """
+    lines, sample, used = list(lines), [], 0
+    for line in lines:
+        if used + len(line) > SNIFF_CHARS:
+            sample = sample or [line[:SNIFF_CHARS]]
+            break
+        sample.append(line)
+        used += len(line) + 1
     try:
-        return csv.Sniffer().sniff("\n".join(lines), delimiters=DELIMITERS).delimiter
+        return csv.Sniffer().sniff("\n".join(sample), delimiters=DELIMITERS).delimiter
     except csv.Error:
         counts = [(lines[0].count(delimiter), delimiter) for delimiter in ",;\t"] if lines else []
         best = max(counts, key=lambda item: item[0], default=(0, ","))
@@ -254,10 +362,15 @@ def _numbers(path: Path, cells: list[str], data, name: str, delimiter: str,
                     values[position] = float(cell.replace(",", "."))
                     comma = True
                     continue
-                raise fail(path, f"line {data[position][0]}: '{cell}' in column '{name}' is "
-                                 f"not a number{hint}") from None
+                raise fail(path, f"line {data[position][0]}: '{_shown(cell)}' in column "
+                                 f"'{name}' is not a number{hint}") from None
     bad = np.flatnonzero(~np.isfinite(values))
     if len(bad):
-        raise fail(path, f"line {data[bad[0]][0]}: column '{name}' is {cells[bad[0]]} "
+        raise fail(path, f"line {data[bad[0]][0]}: column '{name}' is {_shown(cells[bad[0]])} "
                          f"(NaN or infinite)")
     return values, comma
+
+
+def _shown(cell: str) -> str:
+    """A cell as a message quotes it: cut to ``_SHOWN_CHARS`` characters."""
+    return cell if len(cell) <= _SHOWN_CHARS else cell[:_SHOWN_CHARS - 3] + "..."

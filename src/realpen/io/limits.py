@@ -13,14 +13,18 @@ digits of any number, and refuses ``NaN``/``Infinity``.
 from __future__ import annotations
 
 import json
+import numbers
 import os
 import re
 from pathlib import Path
 
-from realpen.errors import fail
+from realpen.errors import ParameterError, fail, require_number
 
-__all__ = ["MIN_RATE_HZ", "MAX_RATE_HZ", "MAX_CHANNELS", "MAX_FRAMES", "MAX_JSON_BYTES", "MAX_JSON_DEPTH", "MAX_NUMBER_CHARS", "MAX_CSV_FIELD_CHARS",
-           "load_json", "json_depth"]
+__all__ = ["MIN_RATE_HZ", "MAX_RATE_HZ", "MAX_CHANNELS", "MAX_FRAMES", "MAX_JSON_BYTES",
+           "MAX_JSON_DEPTH", "MAX_NUMBER_CHARS", "MAX_CSV_FIELD_CHARS", "MAX_CSV_LINE_CHARS",
+           "MAX_CSV_BYTES", "MAX_NPZ_DIRECTORY_BYTES", "MAX_NPZ_ARRAY_BYTES",
+           "MAX_SAMPLE_MAGNITUDE", "MAX_XML_BYTES", "MAX_MODEL_ORDER",
+           "load_json", "json_depth", "check_size", "check_signal", "require_rate"]
 
 MIN_RATE_HZ = 100
 """The lowest sampling rate (Hz) of a signal read or written: an accelerometer for a pen runs at
@@ -29,9 +33,11 @@ MAX_RATE_HZ = 400_000
 """The highest sampling rate (Hz) of a signal read or written (384 kHz is audio's highest)."""
 MAX_CHANNELS = 32
 """The most channels a recording may have (a pen's accelerometer has 3, a microphone 1–2)."""
-MAX_FRAMES = 2**27
-"""The most samples a signal may hold, over all its channels (134 M: 1 GiB as float64; 27 h of
-a 1.344 kHz accelerometer, 46 min of 48 kHz sound)."""
+MAX_FRAMES = 2**25
+"""The most samples a signal may hold, over all its channels (33.5 M: 256 MiB as float64; 6.9 h
+of one 1.344 kHz accelerometer axis, 2.3 h of three, 11.6 min of 48 kHz mono sound). The
+analysis holds about 100 bytes per sample at its peak, so no recording makes it use more than
+about 3.5 GB."""
 MAX_JSON_BYTES = 4 * 1024 * 1024
 """The largest JSON document read (bytes): a profile.json is a few kB."""
 MAX_JSON_DEPTH = 32
@@ -41,6 +47,30 @@ MAX_NUMBER_CHARS = 64
 holds, and Python's int() on thousands of digits is quadratic."""
 MAX_CSV_FIELD_CHARS = 1024
 """The longest CSV field read (characters); a number needs under 30."""
+MAX_CSV_LINE_CHARS = 65_536
+"""The longest CSV line read (characters): hundreds of numeric columns. A longer line is refused
+before it is split, so one line never costs more than this; it is also below the ``csv``
+module's own field limit (131,072), so every over-long field gets RealPen's message."""
+MAX_CSV_BYTES = 256 * 1024 * 1024
+"""The largest CSV file read (bytes): about an hour of a 1.344 kHz three-axis recording with a
+time column. Longer recordings belong in WAV or NPZ. Values are read into arrays as the file
+streams past, and at most :data:`MAX_FRAMES` numbers (row numbers included) are kept."""
+MAX_NPZ_DIRECTORY_BYTES = 65_536
+"""The largest zip directory of an NPZ file (bytes): a recording's NPZ holds a few arrays, and
+``zipfile`` loads the whole directory (about 1 kB of memory an entry) when the file is opened."""
+MAX_NPZ_ARRAY_BYTES = 65_536
+"""The largest array of an NPZ file other than its samples (bytes, as declared in its header):
+``rate``, ``axes`` and ``units`` need a few dozen."""
+MAX_SAMPLE_MAGNITUDE = 1e12
+"""The largest magnitude of a sample read (in the recording's own units). No unit a recording
+comes in gets near it (a 32-bit ADC count stays below 2.2e9); values beyond it are an overflow or
+a damaged file, and their squares would overflow the spectra."""
+MAX_XML_BYTES = 4 * 1024 * 1024
+"""The largest XML file read (bytes): a HaTT model file is about 130 kB. ElementTree keeps about
+25 bytes of memory for each byte of dense markup, so this bounds a parse near 100 MB."""
+MAX_MODEL_ORDER = 128
+"""The highest AR or MA order of a texture model (HaTT's published models go to 20); the
+polynomial roots cost the cube of the order."""
 
 # Strings are removed before brackets are counted: a "[" inside a string is not nesting.
 _JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
@@ -108,3 +138,83 @@ def load_json(source: bytes | str | os.PathLike, what: object | None = None):
         return json.loads(text, parse_constant=_refuse_constant)
     except ValueError as error:  # JSONDecodeError, and NaN/Infinity refused above
         raise fail(name, f"is not valid JSON ({error})") from None
+
+
+def check_size(path: str | os.PathLike, limit: int, kind: str) -> int:
+    """The size of the file at ``path`` in bytes, refused when over ``limit`` bytes.
+
+    Args:
+        path: the file (its existence is the caller's to check first).
+        limit: the most bytes accepted.
+        kind: what the file is, for the message (``"CSV files"``).
+
+    Raises:
+        RealPenError: ``"<path>: is N bytes; <kind> are limited to <limit>"``, or a file that
+            cannot be read.
+    """
+    try:
+        size = Path(path).stat().st_size
+    except OSError as error:
+        raise fail(path, f"cannot read ({error.strerror or error})") from None
+    if size > limit:
+        raise fail(path, f"is {size:,} bytes; {kind} are limited to {limit:,}")
+    return size
+
+
+def _rate_text(rate: float) -> str:
+    """A rate for a message, in Hz; an integer too large for a float is not converted."""
+    if isinstance(rate, numbers.Integral) and abs(rate) >= 10**15:
+        return "over 1e+15" if rate > 0 else "below -1e+15"
+    return f"{rate:,.10g}"
+
+
+def _count_text(count: int) -> str:
+    """A count from a header for a message: a forged one may have thousands of digits."""
+    return f"{count:,}" if count < 10**15 else "over 10^15"
+
+
+def check_signal(source: object, rate: float | None, frames: int, channels: int) -> None:
+    """Refuse a signal whose header is out of the limits, before its samples are read.
+
+    Args:
+        source: names the file in messages.
+        rate: sampling rate in Hz, between :data:`MIN_RATE_HZ` and :data:`MAX_RATE_HZ` (None:
+            not known yet, not checked).
+        frames: frames the file declares (samples per channel).
+        channels: channels it declares, 1 to :data:`MAX_CHANNELS`; ``frames × channels`` may
+            not exceed :data:`MAX_FRAMES`.
+
+    Raises:
+        RealPenError: one line naming ``source`` and the limit.
+    """
+    # NaN and infinity fail the comparison; an integer compares exactly, however large.
+    if rate is not None and not (isinstance(rate, numbers.Real)
+                                 and MIN_RATE_HZ <= rate <= MAX_RATE_HZ):
+        raise fail(source, f"sampling rate {_rate_text(rate)} Hz is outside the "
+                           f"{MIN_RATE_HZ:,}–{MAX_RATE_HZ:,} Hz RealPen reads (a damaged header?)")
+    if not 1 <= channels <= MAX_CHANNELS:
+        raise fail(source, f"has {_count_text(channels)} channels; recordings are limited to "
+                           f"1–{MAX_CHANNELS}")
+    if frames * channels > MAX_FRAMES:
+        raise fail(source, f"holds {_count_text(frames)} frames × {channels} channel(s); "
+                           f"recordings are limited to {MAX_FRAMES:,} samples in all")
+
+
+def require_rate(parameter: str, rate: float) -> None:
+    """Raise a :class:`~realpen.errors.ParameterError` unless ``rate`` (Hz) is a number between
+    :data:`MIN_RATE_HZ` and :data:`MAX_RATE_HZ`.
+
+    >>> require_rate("rate", 1)
+    Traceback (most recent call last):
+    ...
+    realpen.errors.ParameterError: rate: must be between 100 and 400,000 Hz, got 1
+    """
+    if isinstance(rate, numbers.Integral) and not isinstance(rate, bool) and abs(rate) > MAX_RATE_HZ:
+        # Before require_number, which converts to float: 10**400 would overflow.
+        raise ParameterError(parameter, f"must be between {MIN_RATE_HZ:,} and {MAX_RATE_HZ:,} Hz, "
+                                        f"got {_rate_text(rate)}")
+    # Not a positive number at all keeps require_number's wording ("must be > 0, got -5").
+    require_number(parameter, rate, minimum=0.0, inclusive=False)
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+        raise ParameterError(parameter, f"must be between {MIN_RATE_HZ:,} and {MAX_RATE_HZ:,} Hz, "
+                                        f"got {_rate_text(rate)}")

@@ -3,13 +3,19 @@
 A :class:`Recording` is a block of samples (frames × axes) with its rate, axis names, units and
 provenance. Loaders accept WAV/FLAC/OGG (any PCM or float subtype, any channel count), CSV (a
 header row, an optional time column) and NPZ.
+
+Every loader checks what the file declares against :mod:`realpen.io.limits` (rate, channels,
+samples in all) before it allocates the samples, so a forged header or a compressed NPZ of
+zeros is refused in one line instead of exhausting memory.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import zipfile
+import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -17,9 +23,20 @@ import numpy as np
 import soundfile as sf
 from scipy.interpolate import CubicSpline
 
-from realpen.errors import ParameterError, fail, require_number
+from realpen.errors import ParameterError, fail
 from realpen.io.csvtable import read_csv
 from realpen.io.files import atomic_path, check_readable_file, riff_chunks, sha256_of
+from realpen.io.limits import (
+    MAX_CHANNELS,
+    MAX_FRAMES,
+    MAX_NPZ_ARRAY_BYTES,
+    MAX_NPZ_DIRECTORY_BYTES,
+    MAX_RATE_HZ,
+    MAX_SAMPLE_MAGNITUDE,
+    MIN_RATE_HZ,
+    check_signal,
+    require_rate,
+)
 
 __all__ = ["Recording", "load_recording", "as_recording", "save_npz", "AXIS_CHOICES"]
 
@@ -80,11 +97,35 @@ class Recording:
         return replace(self, samples=samples, history=self.history + (step,), **changes)
 
 
-def _check_finite(samples: np.ndarray, source: str) -> None:
-    bad = ~np.isfinite(samples)
-    if bad.any():
-        first = int(np.argwhere(bad)[0][0])
-        raise fail(source, f"contains NaN or infinite values (first at frame {first})")
+_SCAN_FRAMES = 1 << 20  # frames looked at a time when searching for a bad value
+
+
+def _value_problem(samples: np.ndarray) -> str | None:
+    """What is wrong with the values of ``samples`` (frames × axes), or None when nothing is.
+
+    NaN, infinity, or a magnitude beyond :data:`MAX_SAMPLE_MAGNITUDE`: such a value is an
+    overflow or damage, and judged later it would pass for silence or break the spectra. Only
+    the failing case scans for the first bad frame, in blocks, so a valid recording costs no
+    copy of its samples.
+    """
+    if samples.size == 0:
+        return None
+    peak = max(float(np.max(samples)), -float(np.min(samples)))  # NaN propagates
+    if math.isfinite(peak) and peak <= MAX_SAMPLE_MAGNITUDE:
+        return None
+    for start in range(0, samples.shape[0], _SCAN_FRAMES):
+        block = samples[start:start + _SCAN_FRAMES]
+        bad = ~np.isfinite(block)
+        if bad.any():
+            frame = start + int(np.argwhere(bad)[0][0])
+            return f"contains NaN or infinite values (first at frame {frame})"
+        large = np.abs(block) > MAX_SAMPLE_MAGNITUDE
+        if large.any():
+            frame, axis = (int(i) for i in np.argwhere(large)[0])
+            return (f"holds the value {block[frame - start, axis]:.3g} at frame {frame}; samples "
+                    f"beyond ±{MAX_SAMPLE_MAGNITUDE:g} are not a measurement in any unit (an "
+                    f"overflow or a damaged file)")
+    return None
 
 
 def _axis_names(count: int) -> tuple[str, ...]:
@@ -99,13 +140,14 @@ def as_recording(data, rate: float | None = None, *, rate_parameter: str = "rate
     Args:
         data: a Recording; a path to a WAV/FLAC/OGG, CSV or NPZ file (see
             :func:`load_recording`); or an array of shape (frames,) or (frames, axes).
-        rate: sampling rate in Hz: required with an array, refused with a Recording, and with
-            a path only for files that carry no rate.
+        rate: sampling rate in Hz (``MIN_RATE_HZ`` to ``MAX_RATE_HZ``): required with an array,
+            refused with a Recording, and with a path only for files that carry no rate.
         rate_parameter, data_parameter: how the caller names ``rate`` and ``data`` in messages.
 
     Raises:
-        ParameterError: a missing or superfluous rate, an array that is not (frames, axes) of
-            finite numbers, or a ``data`` of another type.
+        ParameterError: a missing, superfluous or out-of-range rate, an array that is not
+            (frames, axes) of finite numbers within ``MAX_SAMPLE_MAGNITUDE``, more axes or
+            samples than :mod:`realpen.io.limits` allows, or a ``data`` of another type.
 
     >>> as_recording([0.0, 1.0, 0.0, -1.0], rate=1344)
     Recording(x, 4 frames at 1344 Hz (0.003 s), arbitrary, from array)
@@ -119,7 +161,7 @@ def as_recording(data, rate: float | None = None, *, rate_parameter: str = "rate
         return load_recording(data, rate=rate)
     if rate is None:
         raise ParameterError(rate_parameter, "needed in Hz when the data is an array")
-    require_number(rate_parameter, rate, minimum=0.0, inclusive=False)
+    require_rate(rate_parameter, rate)
     try:
         samples = np.asarray(data, dtype=np.float64)
     except (TypeError, ValueError):
@@ -133,8 +175,12 @@ def as_recording(data, rate: float | None = None, *, rate_parameter: str = "rate
     if samples.shape[1] > samples.shape[0]:
         raise ParameterError(data_parameter, f"shape {samples.shape} has more axes than "
                                              f"frames; pass (frames, axes), e.g. data.T")
-    if not np.all(np.isfinite(samples)):
-        raise ParameterError(data_parameter, "contains NaN or infinite values")
+    if samples.shape[1] > MAX_CHANNELS or samples.size > MAX_FRAMES:
+        raise ParameterError(data_parameter, f"shape {samples.shape} is over the limits of "
+                                             f"{MAX_CHANNELS} axes and {MAX_FRAMES:,} samples")
+    problem = _value_problem(samples)
+    if problem:
+        raise ParameterError(data_parameter, problem)
     return Recording(samples, float(rate), _axis_names(samples.shape[1]), source="array")
 
 
@@ -146,21 +192,25 @@ def load_recording(path: str | os.PathLike, rate: float | None = None,
         path: the file. The suffix picks the reader (``.csv``, ``.npz``; anything else is read
             as audio by soundfile).
         rate: sampling rate in Hz for a CSV with no time column or an NPZ with no ``rate``
-            (ignored when the file carries its own rate).
+            (ignored when the file carries its own rate, but always checked): ``MIN_RATE_HZ``
+            to ``MAX_RATE_HZ`` (100 Hz to 400 kHz).
         units: override the unit of the samples.
 
     Returns:
         A :class:`Recording` with ``source`` and ``sha256`` set.
 
     Raises:
-        RealPenError: missing, empty, truncated or unreadable files, NaN/inf samples.
-        ParameterError: ``rate`` is not a positive number, or is needed (a CSV with no time
-            column, an NPZ with no ``rate``) and not given.
+        RealPenError: missing, empty, truncated or unreadable files; NaN/inf samples or samples
+            beyond ``MAX_SAMPLE_MAGNITUDE``; a file over a limit of :mod:`realpen.io.limits`
+            (its rate, channels or samples, checked before they are read; a CSV's bytes, lines
+            and fields; an NPZ's directory and arrays), naming the file and the limit.
+        ParameterError: ``rate`` is not a number from ``MIN_RATE_HZ`` to ``MAX_RATE_HZ``, or is
+            needed (a CSV with no time column, an NPZ with no ``rate``) and not given.
     """
     path = Path(path)
     check_readable_file(path)
     if rate is not None:
-        require_number("rate", rate, minimum=0.0, inclusive=False)
+        require_rate("rate", rate)
     suffix = path.suffix.lower()
     if suffix == ".csv":
         recording = _load_csv(path, rate)
@@ -170,9 +220,12 @@ def load_recording(path: str | os.PathLike, rate: float | None = None,
         recording = _load_audio(path)
     if recording.samples.shape[0] == 0:
         raise fail(path, "holds no samples")
-    if not (np.isfinite(recording.rate) and recording.rate > 0):
-        raise fail(path, f"sampling rate must be a positive number, got {recording.rate}")
-    _check_finite(recording.samples, str(path))
+    # Every reader checked what it could before reading; this covers a rate given by the caller
+    # for a CSV and the frames a CSV time column's interpolation made.
+    check_signal(path, recording.rate, *recording.samples.shape)
+    problem = _value_problem(recording.samples)
+    if problem:
+        raise fail(path, problem)
     return replace(recording, source=str(path), sha256=sha256_of(path),
                    units=units or recording.units)
 
@@ -181,6 +234,8 @@ def _load_audio(path: Path) -> Recording:
     try:
         with sf.SoundFile(path) as handle:
             expected = handle.frames
+            # The header alone, before the samples are allocated (frames × channels float64).
+            check_signal(path, handle.samplerate, expected, handle.channels)
             data = handle.read(dtype="float64", always_2d=True)
             rate = handle.samplerate
     except (sf.LibsndfileError, RuntimeError, TypeError, ValueError) as error:
@@ -252,37 +307,59 @@ def _even_sampling(path: Path, name: str, times: np.ndarray, values: np.ndarray
         raise fail(path, f"time column '{name}' has a gap of {steps[widest]:.4g} s after "
                          f"{times[widest]:.4g} s (samples are {step:.4g} s apart); analyse the "
                          f"parts on either side separately")
+    rate = 1.0 / step
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:  # before the interpolation allocates its grid
+        raise fail(path, f"time column '{name}' gives a sampling rate of {rate:.4g} Hz, outside "
+                         f"the {MIN_RATE_HZ:,}–{MAX_RATE_HZ:,} Hz RealPen reads (are the times "
+                         f"in seconds?)")
     if np.max(np.abs(steps - step)) <= JITTER_TOLERANCE * step:
-        return 1.0 / step, values
+        return rate, values
     grid = times[0] + np.arange(int(np.floor((times[-1] - times[0]) / step)) + 1) * step
-    return 1.0 / step, CubicSpline(times, values, axis=0)(grid)
+    return rate, CubicSpline(times, values, axis=0)(grid)
+
+
+NPZ_SAMPLE_KEYS = ("samples", "data", "acc", "acceleration")  # the first one present is read
+_NPZ_METADATA = ("rate", "axes", "units")
+_READ_BYTES = 1 << 22  # bytes inflated at a time from an NPZ member
+# What a damaged archive or member can raise from zipfile (RuntimeError: encrypted), zlib and
+# numpy's header reader.
+_NPZ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+               RuntimeError)
 
 
 def _load_npz(path: Path, rate: float | None) -> Recording:
+    """An NPZ recording, read member by member within the limits, never with ``np.load``.
+
+    ``np.load`` allocates whatever shape a member's header declares and ``zipfile`` loads the
+    whole directory; here the directory's size and each header are checked first, and a
+    member is inflated only up to the size its header declares.
+    """
     try:
-        archive = np.load(path, allow_pickle=False)
-        if not hasattr(archive, "files"):
-            raise fail(path, "is a single .npy array, not an NPZ archive")
-        with archive:
-            contents = {key: archive[key] for key in archive.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
+        with open(path, "rb") as handle:
+            if handle.read(6) == b"\x93NUMPY":
+                raise fail(path, "is a single .npy array, not an NPZ archive")
+            _check_zip_directory(path, handle)
+        with zipfile.ZipFile(path) as archive:
+            members: dict[str, zipfile.ZipInfo] = {}
+            for info in archive.infolist():  # np.savez names the member of array "x" x.npy
+                name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+                members.setdefault(name, info)
+            key = next((k for k in NPZ_SAMPLE_KEYS if k in members), None)
+            if key is None:
+                raise fail(path, "NPZ has no 'samples' array")
+            samples = _read_npz_array(path, archive, members[key], key, samples=True)
+            contents = {name: _read_npz_array(path, archive, members[name], name)
+                        for name in _NPZ_METADATA if name in members}
+    except _NPZ_ERRORS as error:
         raise fail(path, f"not a readable NPZ archive ({error})") from None
-    key = next((k for k in ("samples", "data", "acc", "acceleration") if k in contents), None)
-    if key is None:
-        raise fail(path, "NPZ has no 'samples' array")
-    samples = contents[key]
-    if samples.dtype.kind not in "iuf":
-        raise fail(path, f"'{key}' must hold real numbers, not {samples.dtype}")
-    samples = samples.astype(np.float64)
     if samples.ndim == 1:
         samples = samples[:, None]
-    if samples.ndim != 2:
-        raise fail(path, f"'{key}' must be 1-D or 2-D, got shape {samples.shape}")
     if "rate" in contents:
         stored = contents["rate"]
         if stored.size != 1 or stored.dtype.kind not in "iuf":
             raise fail(path, "'rate' must be one number in Hz")
         rate = float(stored.reshape(()))
+        check_signal(path, rate, *samples.shape)
     elif rate is None:
         raise ParameterError("rate", f"needed in Hz: {path} is an NPZ with no 'rate' array")
     if "axes" in contents:
@@ -296,6 +373,87 @@ def _load_npz(path: Path, rate: float | None) -> Recording:
         raise fail(path, f"NPZ names {len(axes)} axes for {samples.shape[1]} columns")
     units = str(contents["units"]) if "units" in contents else "arbitrary"
     return Recording(samples, rate, axes, units=units)
+
+
+def _check_zip_directory(path: Path, handle) -> None:
+    """Refuse an NPZ whose zip directory is larger than :data:`MAX_NPZ_DIRECTORY_BYTES`.
+
+    ``zipfile.ZipFile`` reads and parses the whole directory when it opens a file, with no
+    limit and no public way to see its size first. ``_EndRecData`` is the function it uses to
+    find the directory (the zip64 record included), so the size checked is the size it reads.
+    """
+    find_end = getattr(zipfile, "_EndRecData", None)
+    if find_end is None:  # a Python whose zipfile has changed: its own limits must do
+        return
+    end = find_end(handle)
+    if end is None:
+        raise zipfile.BadZipFile("File is not a zip file")
+    size = end[zipfile._ECD_SIZE]
+    if size > MAX_NPZ_DIRECTORY_BYTES:
+        raise fail(path, f"its zip directory is {size:,} bytes; NPZ files are limited to "
+                         f"{MAX_NPZ_DIRECTORY_BYTES:,} (a recording needs a few arrays)")
+
+
+def _read_npz_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo, key: str,
+                    samples: bool = False) -> np.ndarray:
+    """One member of an NPZ, checked from its .npy header before any of its data is read.
+
+    The samples (``samples=True``) must be 1-D or 2-D real numbers within ``MAX_CHANNELS`` and
+    ``MAX_FRAMES``, and come back as float64, converted block by block so that no second copy
+    in the stored type is made; any other member may declare at most
+    ``MAX_NPZ_ARRAY_BYTES``. Object dtypes (pickles) and records are refused.
+    """
+    if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
+        # zipfile inflates bzip2 and LZMA members without an output bound; numpy never
+        # writes them.
+        raise fail(path, f"'{key}' is compressed with zip method {info.compress_type}; NPZ "
+                         f"arrays must be stored or deflated, as numpy writes them")
+    with archive.open(info) as handle:
+        version = np.lib.format.read_magic(handle)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(handle)
+        elif version == (2, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(handle)
+        else:
+            raise fail(path, f"'{key}' is a .npy version {version[0]}.{version[1]} array; "
+                             f"RealPen reads versions 1.0 and 2.0")
+        if dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None:
+            raise fail(path, f"'{key}' holds {dtype} values; NPZ arrays must hold numbers or "
+                             f"text (objects, which need pickles, and records are refused)")
+        # A forged header's numbers may have thousands of digits: messages do not quote them.
+        if any(size < 0 for size in shape):
+            raise fail(path, f"'{key}' declares an impossible shape (a negative size)")
+        count = math.prod(shape)  # exact: Python integers, however large the header's numbers
+        if samples:
+            if dtype.kind not in "iuf":
+                raise fail(path, f"'{key}' must hold real numbers, not {dtype}")
+            if len(shape) not in (1, 2):
+                raise fail(path, f"'{key}' must be 1-D or 2-D, got {len(shape)}-D")
+            check_signal(path, None, shape[0], shape[1] if len(shape) == 2 else 1)
+            flat = np.empty(count, dtype=np.float64)
+            step = max(1, _READ_BYTES // max(dtype.itemsize, 1))
+            for start in range(0, count, step):
+                stop = min(start + step, count)
+                data = _read_exactly(handle, (stop - start) * dtype.itemsize, path, key)
+                flat[start:stop] = np.frombuffer(data, dtype=dtype)
+        else:
+            size = count * dtype.itemsize
+            if size > MAX_NPZ_ARRAY_BYTES:
+                raise fail(path, f"'{key}' declares more than {MAX_NPZ_ARRAY_BYTES:,} bytes; "
+                                 f"NPZ arrays other than the samples are limited to "
+                                 f"{MAX_NPZ_ARRAY_BYTES:,}")
+            flat = np.frombuffer(_read_exactly(handle, size, path, key), dtype=dtype,
+                                 count=count)
+    return flat.reshape(shape[::-1]).T if fortran else flat.reshape(shape)
+
+
+def _read_exactly(handle, size: int, path: Path, key: str) -> bytes:
+    """``size`` bytes of an NPZ member; ``read(size)`` inflates no more than it returns."""
+    data = handle.read(size)
+    if len(data) < size:
+        raise fail(path, f"'{key}' is truncated: its header declares more data than the "
+                         f"archive holds")
+    return data
 
 
 def save_npz(recording: Recording, path: str | os.PathLike) -> None:

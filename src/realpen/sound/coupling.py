@@ -34,7 +34,6 @@ same gains; the fit reports which one was held.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -48,13 +47,17 @@ from scipy import optimize, signal
 from realpen.errors import ParameterError, fail
 from realpen.io.csvtable import read_csv
 from realpen.io.files import check_readable_file, write_json
+from realpen.io.limits import load_json
 
 __all__ = ["Coupling", "CouplingFit", "one_pole", "fit_coupling", "load_measurements", "FORMAT",
-           "FIXABLE", "REPRODUCE_TOLERANCE"]
+           "FIXABLE", "REPRODUCE_TOLERANCE", "MAX_SMOOTHING_MS"]
 
 FORMAT = "realpen.coupling/1"
 FIXABLE = ("c_ov", "c_op")
 REPRODUCE_TOLERANCE = 1e-9  # gain units: the saved constants must give the fitted gains
+MAX_SMOOTHING_MS = 10_000.0
+"""The longest time constant of the smoother (ms): ten seconds, 2000 times the default 5 ms.
+A stroke's render runs on for five time constants after its last event, so this bounds it."""
 
 
 class Coupling(BaseModel):
@@ -66,7 +69,8 @@ class Coupling(BaseModel):
         c_x: gain per mm/s of speed.
         c_ov: speed offset in mm/s.
         a_max: upper clamp of the gain (linear).
-        smoothing_ms: time constant of the one-pole smoother in ms (0: none).
+        smoothing_ms: time constant of the one-pole smoother in ms (0: none; at most
+            :data:`MAX_SMOOTHING_MS`).
         rate_speed_ref: speed in mm/s that plays at the recorded rate.
         rate_exponent: playback rate ∝ (v / rate_speed_ref) ** rate_exponent (0: constant rate).
         rate_min, rate_max: bounds of the playback rate.
@@ -80,7 +84,7 @@ class Coupling(BaseModel):
     c_x: float = 0.02
     c_ov: float = 12.0
     a_max: float = Field(2.0, gt=0)
-    smoothing_ms: float = Field(5.0, ge=0)
+    smoothing_ms: float = Field(5.0, ge=0, le=MAX_SMOOTHING_MS)
     rate_speed_ref: float = Field(50.0, gt=0)
     rate_exponent: float = Field(0.25, ge=0)
     rate_min: float = Field(0.8, gt=0, le=1)
@@ -144,16 +148,18 @@ class Coupling(BaseModel):
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Coupling:
-        """Load a coupling JSON file."""
+        """Load a coupling JSON file.
+
+        Raises:
+            RealPenError: one line naming the file: missing or empty; over a limit of
+                :func:`realpen.io.limits.load_json` (size, nesting, number length) or not JSON;
+                a field missing, unknown or out of range.
+        """
         path = Path(path)
         check_readable_file(path)
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except UnicodeDecodeError:
-            raise fail(path, "not a text JSON file") from None
-        except json.JSONDecodeError as error:
-            raise fail(path, f"not valid JSON ({error.msg}, line {error.lineno})") from None
-        return cls.from_json(data, path)
+        # The one bounded JSON reader: json.loads alone recurses without limit on nesting and
+        # converts integers of any length.
+        return cls.from_json(load_json(path), path)
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the coupling JSON to ``path`` atomically."""
