@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
 import concurrent.futures
 import contextlib
 import json
@@ -188,13 +189,13 @@ async def run_page(ws_url: str, page_no: int, messages: list[dict], drop_at: int
             reply = json.loads(await ws.recv())
             assert reply["type"] == "ack", reply
             # Everything not acknowledged goes again, in order.
-            queue = [i for i in range(next_to_send) if i not in acked]
+            queue = collections.deque(i for i in range(next_to_send) if i not in acked)
             counters["resent"] += len(queue)
             in_flight: set[int] = set()
             try:
                 while len(acked) < len(texts):
                     while len(in_flight) < WINDOW and (queue or next_to_send < len(texts)):
-                        i = queue.pop(0) if queue else next_to_send
+                        i = queue.popleft() if queue else next_to_send
                         if i == next_to_send:
                             next_to_send += 1
                         await ws.send(texts[i])
@@ -209,9 +210,7 @@ async def run_page(ws_url: str, page_no: int, messages: list[dict], drop_at: int
                         raise SystemExit(f"page {page_no}: {reply}")
                     acked.add(reply["seq"] - 1)
                     in_flight.discard(reply["seq"] - 1)
-            except (ConnectionError, OSError, Exception) as error:  # reconnect and resend
-                if isinstance(error, SystemExit):
-                    raise
+            except Exception:  # the connection went away: reconnect and resend
                 continue
 
 

@@ -462,6 +462,49 @@ def test_a_stroke_drawn_across_a_server_crash_is_stored_whole_and_once(browser, 
     assert xs == sorted(xs)  # in drawing order (the stroke goes left to right)
 
 
+def test_a_reload_keeps_and_sends_what_the_server_had_not_acknowledged(browser, tmp_path):
+    with serve(tmp_path) as server:
+        server.store = tmp_path / "strokes.sqlite3"
+        relay = {"on": True}  # off: the socket swallows everything, both ways
+
+        def route(ws):
+            upstream = ws.connect_to_server()
+            ws.on_message(lambda m: relay["on"] and upstream.send(m))
+            upstream.on_message(lambda m: relay["on"] and ws.send(m))
+
+        page = Page(browser, server)
+        try:
+            page.page.route_web_socket("**/ws", route)
+            page.page.reload()
+            page.page.wait_for_function("() => window.realpen && window.realpen.ready && "
+                                        "window.realpen.link.state === 'open'")
+            page.stroke(writing(30))
+            relay["on"] = False
+            page.stroke(writing(40, y0=320), lift=False)
+            page.pen("mouseReleased", 200, 320, 0.0, time.time() + 1)
+            page.page.wait_for_function("() => !window.realpen.down && "
+                                        "window.realpen.link.unacked > 0")
+            unacked = page.eval("realpen.link.unacked")
+            page.page.on("dialog", lambda dialog: dialog.accept())  # "leave the page?"
+            relay["on"] = True
+            page.page.reload()
+            page.page.wait_for_function("() => window.realpen && window.realpen.ready && "
+                                        "window.realpen.link.state === 'open' && "
+                                        "window.realpen.link.unacked === 0")
+            assert page.eval("realpen.stroke") == 2  # the same page: its numbers go on
+            assert page.problems == []
+        finally:
+            page.close()
+        strokes = store_rows(server, "SELECT page_stroke, sample_count, end_reason, page FROM "
+                                     "strokes ORDER BY id")
+    assert [row[:1] + row[2:3] for row in strokes] == [(1, "pen_up"), (2, "pen_up")]
+    assert strokes[0][3] == strokes[1][3]  # one page across the reload
+    assert strokes[1][1] >= 40 and unacked >= 3  # pen-down, its samples, pen-up: all kept
+    xs = [x for (x,) in store_rows(server, "SELECT x FROM samples WHERE stroke_id = "
+                                           "(SELECT MAX(id) FROM strokes) ORDER BY seq")]
+    assert len(xs) == len(set(xs)) == strokes[1][1]
+
+
 # ---- pens whose audio is unusual or broken ----------------------------------------------------
 
 def test_a_pen_with_a_2_khz_tactile_pattern_loads_and_plays(browser, tmp_path):

@@ -27,7 +27,7 @@ from websockets.sync.client import connect  # noqa: E402
 
 from realpen.errors import RealPenError  # noqa: E402
 from realpen.live.app import DEVICE_LOG_PAGE, LiveSettings, create_app  # noqa: E402
-from realpen.live.auth import CONTENT_SECURITY_POLICY  # noqa: E402
+from realpen.live.auth import CONTENT_SECURITY_POLICY, content_security_policy  # noqa: E402
 from realpen.live.device import Origin, SimulatedDevice  # noqa: E402
 from realpen.live.server import bind, server_config  # noqa: E402
 from realpen.live.store import StrokeStore  # noqa: E402
@@ -140,7 +140,106 @@ def test_store_numbers_samples_and_ignores_a_number_it_has(tmp_path):
         [(0, 0.0), (1, 1.0), (2, 2.0), (3, 3.0), (4, 4.0), (5, 0.0)]
 
 
+def test_a_page_back_on_a_new_connection_takes_over_its_stroke(client, store_path):
+    hello = {"type": "hello", "seq": 0, "client": "t", "page": PAGE}
+    with client.websocket_connect(WS) as old:
+        talk(old, hello)
+        old_session = talk(old, pen_down(1))
+        with client.websocket_connect(WS) as new:  # the old one is not yet known to be dead
+            new_session = talk(new, hello)["session"]
+            assert talk(new, {"type": "samples", "seq": 2, "stroke": 1, "index": 0,
+                              "samples": batch(0)})["type"] == "ack"
+            assert talk(new, {"type": "gain", "seq": 3, "stroke": 1, "t": 10.1,
+                              "target": 0.5})["type"] == "ack"
+            old.close()  # closing later, it leaves the pen and the stroke alone
+            assert client.get("/api/status").json()["samples"] == 4
+            assert rows(store_path, "SELECT end_reason FROM strokes") == [(None,)]
+            assert talk(new, {"type": "pen_up", "seq": 4, "stroke": 1, "t": 11.0})["type"] == \
+                "ack"
+    assert old_session["stroke_id"] == 1
+    log = client.get("/api/device/log").json()["entries"]
+    assert [(e["kind"], e["session"] == new_session) for e in log] == [
+        ("pen_down", False), ("pen_down", True), ("gain", True), ("pen_up", True)]
+    assert rows(store_path, "SELECT sample_count, end_reason FROM strokes") == [(4, "pen_up")]
+
+
+def test_a_message_the_store_cannot_record_closes_the_socket_for_an_ordered_resend(
+        client, monkeypatch):
+    from starlette.websockets import WebSocketDisconnect
+
+    store = client.app.state.live.store
+    real_begin, failures = store._begin, []
+
+    def full_disk_once(db, fields):
+        if not failures:
+            failures.append(1)
+            raise sqlite3.OperationalError("database or disk is full")
+        return real_begin(db, fields)
+
+    monkeypatch.setattr(store, "_begin", full_disk_once)
+    with client.websocket_connect(WS) as ws:
+        talk(ws, {"type": "hello", "seq": 0, "client": "t", "page": PAGE})
+        reply = talk(ws, pen_down(1))
+        assert reply["code"] == "store" and reply["seq"] == 1
+        with pytest.raises(WebSocketDisconnect) as closed:
+            ws.receive_text()
+        assert closed.value.code == 1011
+    log = client.get("/api/device/log").json()["entries"]
+    assert [e["kind"] for e in log] == ["pen_down", "pen_up"]  # not left down on the pen
+    with client.websocket_connect(WS) as ws:  # the page resends from the pen-down on
+        talk(ws, {"type": "hello", "seq": 2, "client": "t", "page": PAGE})
+        assert talk(ws, pen_down(1))["type"] == "ack"
+
+
 # ---- the store: crashes, a second server, damage, the journal, old stores ------------------
+
+def test_a_refused_second_store_leaves_the_first_untouched(tmp_path):
+    path = tmp_path / "s.sqlite3"
+    first = StrokeStore(path)  # it created the file
+    with pytest.raises(RealPenError, match="in use"):
+        StrokeStore(path)
+    assert first.begin_stroke(session="s", page_stroke=1, page_t0=0.0, **STROKE_FIELDS) == 1
+    first.close()
+    assert rows(path, "SELECT COUNT(*) FROM strokes") == [(1,)]
+
+
+def test_writes_that_cannot_begin_fail_and_later_ones_succeed(tmp_path, monkeypatch):
+    from realpen.live import store as store_module
+
+    monkeypatch.setattr(store_module, "BUSY_TIMEOUT_MS", 200)
+    path = tmp_path / "s.sqlite3"
+    store = StrokeStore(path)
+    other = sqlite3.connect(path, isolation_level=None)
+    other.execute("BEGIN IMMEDIATE")  # another process holds the write lock
+    try:
+        futures = [store.begin(session="s", page_stroke=k, page_t0=0.0, **STROKE_FIELDS)
+                   for k in (1, 2)]
+        for future in futures:  # every future of the batch resolves, none hangs
+            with pytest.raises(sqlite3.OperationalError, match="locked"):
+                future.result(timeout=10)
+    finally:
+        other.execute("ROLLBACK")
+        other.close()
+    assert store.begin_stroke(session="s", page_stroke=3, page_t0=0.0, **STROKE_FIELDS) > 0
+    store.close()
+    with pytest.raises(sqlite3.ProgrammingError, match="closed"):
+        store.begin(session="s", page_stroke=4, page_t0=0.0, **STROKE_FIELDS).result(timeout=5)
+
+
+def test_a_write_whose_caller_stopped_waiting_is_still_made(tmp_path):
+    path = tmp_path / "s.sqlite3"
+    store = StrokeStore(path)
+    sid = store.begin_stroke(session="s", page_stroke=1, page_t0=0.0, **STROKE_FIELDS)
+    gate = threading.Event()
+    held = store._submit(lambda db: gate.wait(10))  # the writer is busy with this
+    ended = store.end(sid, "disconnect")
+    assert ended.cancel()  # the connection's task was cancelled while the end was queued
+    gate.set()
+    held.result(timeout=10)
+    store.close()
+    assert rows(path, "SELECT end_reason FROM strokes") == [("disconnect",)]
+
+
 
 CRASHER = """
 import os, sys
@@ -228,12 +327,17 @@ def test_a_version_1_store_is_upgraded_in_place(tmp_path):
             INSERT INTO strokes VALUES (1, 'abc', 1, 'pencil', '000000000000', 'none', 'visible',
               'pen', 4.0, 0, 0.0, '2026-01-01T00:00:00.000+00:00', '2026-01-01T00:00:01.000+00:00',
               'pen_up', 0);
+            INSERT INTO strokes VALUES (2, 'abc', 1, 'pencil', '000000000000', 'none', 'visible',
+              'pen', 4.0, 0, 0.0, '2026-01-01T00:00:02.000+00:00', '2026-01-01T00:00:03.000+00:00',
+              'pen_up', 0);
             PRAGMA user_version = 1;
         """)
     store = StrokeStore(path)
     assert store.begin_stroke(session="abc", page_stroke=1, page_t0=0.0, **STROKE_FIELDS) == 1
     store.close()
-    assert rows(path, "SELECT page, end_reason FROM strokes") == [("abc", "pen_up")]
+    # Version 1 took a stroke number twice on one connection: the later stroke stays its own.
+    assert rows(path, "SELECT page, end_reason FROM strokes") == [("abc", "pen_up"),
+                                                                   ("abc#2", "pen_up")]
     assert rows(path, "PRAGMA user_version") == [(2,)]
 
 
@@ -248,7 +352,9 @@ def test_every_response_carries_the_security_headers(client, path, status):
     response = client.get(path)
     assert response.status_code == status
     headers = response.headers
-    assert headers["content-security-policy"] == CONTENT_SECURITY_POLICY
+    assert headers["content-security-policy"] == content_security_policy("127.0.0.1")
+    assert "connect-src 'self' ws://127.0.0.1 wss://127.0.0.1;" in \
+        headers["content-security-policy"]
     assert "frame-ancestors 'none'" in CONTENT_SECURITY_POLICY
     assert "script-src 'self';" in CONTENT_SECURITY_POLICY and "unsafe" not in \
         CONTENT_SECURITY_POLICY
@@ -264,7 +370,9 @@ def test_refusals_carry_the_headers_too(tmp_path, monkeypatch):
         refused = lan.get("/api/config")
         assert refused.status_code == 401
         assert refused.headers["x-frame-options"] == "DENY"
-        assert refused.headers["content-security-policy"] == CONTENT_SECURITY_POLICY
+        assert refused.headers["content-security-policy"] == content_security_policy("127.0.0.1")
+        odd = lan.get("/api/config", headers={"host": "x; script-src *"})
+        assert odd.headers["content-security-policy"] == CONTENT_SECURITY_POLICY
 
 
 @pytest.mark.parametrize("headers, path, allowed", [

@@ -89,10 +89,12 @@ class LiveState:
     store: StrokeStore
     device: PenDevice
     sessions: dict[str, Session] = field(default_factory=dict)
+    pages: dict[str, Session] = field(default_factory=dict)  # page id → its live session
     final_counts: tuple[int, int] | None = None  # (strokes, samples) when the store closed
 
     def open_session(self) -> Session:
-        session = Session(self.catalog, self.store, self.device, self.settings.max_message_bytes)
+        session = Session(self.catalog, self.store, self.device, self.settings.max_message_bytes,
+                          self.pages)
         self.sessions[session.id] = session
         return session
 
@@ -195,6 +197,11 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
                 # store writes waits in its own TCP window, and no one else does.
                 reply = await session.handle(raw)
                 await websocket.send_text(reply.model_dump_json(exclude_none=True))
+                if getattr(reply, "code", None) == "store":
+                    # The store could not record it: closing makes the page send again, in
+                    # order, everything not acknowledged (later messages depend on this one).
+                    await websocket.close(1011, "the stroke store could not record a message")
+                    break
         except (WebSocketDisconnect, OSError, RuntimeError):
             pass
         finally:

@@ -21,6 +21,7 @@ styles and connections and no framing, ``X-Frame-Options: DENY``, ``nosniff`` an
 
 from __future__ import annotations
 
+import re
 import secrets
 from collections.abc import Collection
 from urllib.parse import parse_qs, urlsplit
@@ -34,8 +35,8 @@ CONTENT_SECURITY_POLICY = (
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
     "media-src 'self' blob:; connect-src 'self'; font-src 'self'; manifest-src 'self'; "
     "base-uri 'none'; form-action 'self'; frame-ancestors 'none'")
+_SAFE_HOST = re.compile(r"[A-Za-z0-9.:\[\]-]{1,260}")
 SECURITY_HEADERS = (
-    (b"content-security-policy", CONTENT_SECURITY_POLICY.encode()),
     (b"x-frame-options", b"DENY"),
     (b"x-content-type-options", b"nosniff"),
     (b"referrer-policy", b"no-referrer"),
@@ -117,6 +118,19 @@ class AccessGuard:
         await self.app(scope, receive, send_with_cookie)
 
 
+def content_security_policy(host: str | None = None) -> str:
+    """The page's Content-Security-Policy for a request to ``host`` (its ``Host`` header).
+
+    ``connect-src 'self'`` covers the page's WebSocket in current browsers; Safari before 16
+    does not count ``ws:`` as 'self', so the server's own ``ws://`` and ``wss://`` address is
+    named as well (when the Host header is a plain host name or address).
+    """
+    if not host or not _SAFE_HOST.fullmatch(host):
+        return CONTENT_SECURITY_POLICY
+    return CONTENT_SECURITY_POLICY.replace(
+        "connect-src 'self';", f"connect-src 'self' ws://{host} wss://{host};")
+
+
 def _cross_site(scope, headers: Headers) -> bool:
     """A browser request made by another site's page (Fetch Metadata), other than following a
     link to the writing page."""
@@ -129,7 +143,8 @@ def _cross_site(scope, headers: Headers) -> bool:
 
 
 class SecurityHeaders:
-    """ASGI middleware adding :data:`SECURITY_HEADERS` to every HTTP response."""
+    """ASGI middleware adding the Content-Security-Policy (:func:`content_security_policy`)
+    and :data:`SECURITY_HEADERS` to every HTTP response."""
 
     def __init__(self, app):
         self.app = app
@@ -139,10 +154,14 @@ class SecurityHeaders:
             await self.app(scope, receive, send)
             return
 
+        policy = content_security_policy(Headers(scope=scope).get("host")).encode()
+
         async def send_with_headers(message):
             if message["type"] == "http.response.start":
                 present = {name.lower() for name, _ in message.get("headers", [])}
-                extra = [(name, value) for name, value in SECURITY_HEADERS
+                extra = [(name, value)
+                         for name, value in ((b"content-security-policy", policy),
+                                             *SECURITY_HEADERS)
                          if name not in present]
                 message = {**message, "headers": [*message.get("headers", []), *extra]}
             await send(message)

@@ -52,7 +52,7 @@ class OpenStroke:
     """The stroke a page has down."""
 
     number: int
-    stroke_id: int | None  # None until the store has recorded the pen-down
+    stroke_id: int
     a_max: float
     tactile: bool
 
@@ -61,9 +61,14 @@ class Session:
     """The server side of one page connection."""
 
     def __init__(self, catalog: Catalog, store: StrokeStore, device: PenDevice,
-                 max_message_bytes: int = MAX_MESSAGE_BYTES):
+                 max_message_bytes: int = MAX_MESSAGE_BYTES,
+                 pages: dict[str, Session] | None = None):
         self.id = uuid.uuid4().hex[:12]
         self.page = self.id  # until the page's hello names it
+        # The live session of each page (shared by the server's sessions): when a page comes
+        # back on a new connection while its old one is not yet known to be dead, the new one
+        # takes over and the old one, closing later, leaves the pen and the store alone.
+        self.pages = pages if pages is not None else {}
         self.catalog, self.store, self.device = catalog, store, device
         self.max_message_bytes = max_message_bytes
         self.stroke: OpenStroke | None = None
@@ -102,10 +107,11 @@ class Session:
                                                         message.index))
             return {}
         if isinstance(message, Gain):
+            if self.stroke is None or self.stroke.number != message.stroke:
+                await self._stroke_id(message.stroke)  # resent after a reconnect
             stroke = self.stroke
             if stroke is None or stroke.number != message.stroke:
-                await self._stroke_id(message.stroke)  # a resent gain of an earlier stroke
-                return {}
+                return {}  # a gain of an earlier stroke: the pen has moved on
             if message.target > stroke.a_max * (1 + 1e-9):
                 raise MessageError("invalid_message", f"gain.target: {message.target:g} is above "
                                    f"the pen's a_max {stroke.a_max:g}")
@@ -115,15 +121,20 @@ class Session:
         if isinstance(message, PenDown):
             return await self._pen_down(message)
         if isinstance(message, PenUp):
+            stroke_id = await self._stroke_id(message.stroke)
             if self.stroke is not None and self.stroke.number == message.stroke:
                 await self._end("pen_up", message.seq)
-            else:  # the page resends the pen-up of a stroke the server ended for it
-                stroke_id = await self._stroke_id(message.stroke)
+            else:  # the pen-up of a stroke already ended (resent after a reconnect)
                 await asyncio.wrap_future(self.store.end(stroke_id, "pen_up"))
             return {}
         if isinstance(message, Hello):
-            if message.page is not None:
+            if message.page is not None and message.page != self.page:
+                self._release_page()
                 self.page = message.page
+                older = self.pages.get(self.page)
+                if older is not None and older is not self:
+                    older.detach()
+                self.pages[self.page] = self
             return {"session": self.id}
         raise MessageError("invalid_message", f"unhandled message type {message.type}")
 
@@ -140,31 +151,43 @@ class Session:
         if self.stroke is not None:
             await self._end("replaced", message.seq)
         tactile = message.modality in TACTILE_MODALITIES
-        self.device.pen_down(Origin(self.id, message.stroke, message.seq), profile, tactile)
-        self.stroke = OpenStroke(message.stroke, None, profile.meta.coupling.a_max, tactile)
+        origin = Origin(self.id, message.stroke, message.seq)
+        self.device.pen_down(origin, profile, tactile)
         begun = self.store.begin(
             session=self.id, page=self.page, page_stroke=message.stroke, pen=profile.name,
             profile_version=profile.version, modality=message.modality, ink=message.ink,
             pointer_type=message.pointer_type, px_per_mm=message.px_per_mm,
             calibrated=message.calibrated, page_t0=message.t)
-        self.stroke.stroke_id = await asyncio.wrap_future(begun)
-        return {"stroke_id": self.stroke.stroke_id}
+        try:
+            stroke_id = await asyncio.wrap_future(begun)
+        except BaseException:  # not recorded: the pen is lifted, the page will send it again
+            self.device.pen_up(origin)
+            raise
+        self.stroke = OpenStroke(message.stroke, stroke_id, profile.meta.coupling.a_max, tactile)
+        return {"stroke_id": stroke_id}
 
     async def _stroke_id(self, number: int) -> int:
         """The store id of this page's stroke ``number``: the one down, or one the page drew
-        before (resent messages after a reconnect).
+        before (resent messages after a reconnect). A stroke the server ended for the page
+        (a disconnect, a crash) is taken up again: the pen goes down on the device, so the rest
+        of the stroke is felt.
 
         Raises:
             MessageError: the page never put that stroke down.
         """
-        if self.stroke is not None and self.stroke.number == number \
-                and self.stroke.stroke_id is not None:
+        if self.stroke is not None and self.stroke.number == number:
             return self.stroke.stroke_id
         found = await asyncio.wrap_future(self.store.find(self.page, number))
         if found is None:
             down = "no stroke is down" if self.stroke is None else \
                 f"stroke {self.stroke.number} is down"
             raise MessageError("protocol", f"stroke {number} is not down ({down})")
+        entry = self.catalog.get(found.pen)
+        if self.stroke is None and found.end_reason != "pen_up" and entry is not None:
+            tactile = found.modality in TACTILE_MODALITIES
+            self.device.pen_down(Origin(self.id, number, None), entry.profile, tactile)
+            self.stroke = OpenStroke(number, found.stroke_id,
+                                     entry.profile.meta.coupling.a_max, tactile)
         return found.stroke_id
 
     async def _end(self, reason: str, seq: int | None = None) -> None:
@@ -172,11 +195,21 @@ class Session:
         if stroke is None:
             return
         self.device.pen_up(Origin(self.id, stroke.number, seq))
-        if stroke.stroke_id is not None:
-            await asyncio.wrap_future(self.store.end(stroke.stroke_id, reason))
+        await asyncio.wrap_future(self.store.end(stroke.stroke_id, reason))
+
+    def detach(self) -> None:
+        """The page has come back on another connection, which now owns its stroke: this
+        one, closing later, must neither lift the pen nor end the stroke."""
+        self.stroke = None
+        self._release_page()
+
+    def _release_page(self) -> None:
+        if self.pages.get(self.page) is self:
+            del self.pages[self.page]
 
     async def close(self) -> None:
         """The connection closed: end a stroke left down (reason ``disconnect``)."""
+        self._release_page()
         try:
             await self._end("disconnect")
         except Exception:

@@ -38,7 +38,7 @@ import sqlite3
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import Future
+from concurrent.futures import Future, InvalidStateError
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -59,6 +59,7 @@ SCHEMA_VERSION = 2
 CHECKPOINT_S = 1.0
 WAL_CHECKPOINT_BYTES = 8 * 1024 * 1024
 """The journal is checkpointed and truncated as soon as it passes this size (bytes)."""
+BUSY_TIMEOUT_MS = 5000  # how long a write waits for another process's lock
 MAX_BATCH = 1024  # operations per transaction: bounds how long one commit holds the writer
 END_REASONS = ("pen_up", "disconnect", "replaced", "shutdown", "crash")
 log = logging.getLogger(__name__)
@@ -93,10 +94,13 @@ CREATE TABLE IF NOT EXISTS samples (
 ) WITHOUT ROWID;
 CREATE UNIQUE INDEX IF NOT EXISTS strokes_by_page ON strokes (page, page_stroke);
 """
-# Version 1 had no page column: each connection was its own page.
+# Version 1 had no page column: each connection was its own page. It took a stroke number twice
+# on one connection; such a later stroke keeps its own page id, so none is merged.
 _UPGRADE_FROM_1 = """
 ALTER TABLE strokes ADD COLUMN page TEXT;
 UPDATE strokes SET page = session;
+UPDATE strokes SET page = session || '#' || id
+    WHERE id NOT IN (SELECT MIN(id) FROM strokes GROUP BY session, page_stroke);
 CREATE UNIQUE INDEX IF NOT EXISTS strokes_by_page ON strokes (page, page_stroke);
 """
 _INSERT_SAMPLE = (f"INSERT OR IGNORE INTO samples (stroke_id, seq, {', '.join(SAMPLE_FIELDS)}) "
@@ -108,13 +112,8 @@ def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
-def _connect(path: Path, create: bool) -> sqlite3.Connection:
-    """Open (or create) a store, check that it is one, and bring its schema up to date.
-
-    Raises:
-        RealPenError: one line naming ``path``: no such store, a folder, a place where no file
-            can be made or opened, a file that is not a RealPen stroke store, or a damaged one.
-    """
+def _check_place(path: Path, create: bool) -> None:
+    """Refuse a store path that is missing (unless ``create``), a folder, or under a file."""
     if not create and not path.exists():
         raise fail(path, "no such stroke store")
     if path.is_dir():
@@ -122,11 +121,21 @@ def _connect(path: Path, create: bool) -> sqlite3.Connection:
     existing = next((parent for parent in path.parents if parent.exists()), None)
     if existing is not None and not existing.is_dir():
         raise fail(path, f"{existing} is a file, not a folder")
+
+
+def _connect(path: Path, create: bool) -> sqlite3.Connection:
+    """Open (or create) a store, check that it is one, and bring its schema up to date.
+
+    Raises:
+        RealPenError: one line naming ``path``: no such store, a folder, a place where no file
+            can be made or opened, a file that is not a RealPen stroke store, or a damaged one.
+    """
+    _check_place(path, create)
     try:
         if create:
             path.parent.mkdir(parents=True, exist_ok=True)
-        connection = sqlite3.connect(path, check_same_thread=False, timeout=5.0,
-                                     isolation_level=None)
+        connection = sqlite3.connect(path, check_same_thread=False,
+                                     timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None)
     except (OSError, sqlite3.Error) as error:
         raise fail(path, f"cannot open or create the stroke store here "
                          f"({getattr(error, 'strerror', None) or error})") from None
@@ -138,7 +147,9 @@ def _connect(path: Path, create: bool) -> sqlite3.Connection:
         if version == 0 and not create:
             raise fail(path, "not a RealPen stroke store (empty or another SQLite file)")
         connection.execute("PRAGMA journal_mode=WAL")
-        connection.execute("PRAGMA synchronous=NORMAL")
+        # FULL: a commit is on disk before the page hears its ack (batching keeps the cost of
+        # the fsync to one per batch, ~0.4 ms here).
+        connection.execute("PRAGMA synchronous=FULL")
         connection.execute("PRAGMA foreign_keys=ON")
         if version > 0:
             problem = connection.execute("PRAGMA quick_check(1)").fetchone()[0]
@@ -170,8 +181,48 @@ def _connect(path: Path, create: bool) -> sqlite3.Connection:
     return connection
 
 
+def _resolve(future: Future, value=None, error: BaseException | None = None) -> None:
+    """Give a future its outcome, unless its caller cancelled it or it already has one."""
+    with contextlib.suppress(InvalidStateError):
+        if error is None:
+            future.set_result(value)
+        else:
+            future.set_exception(error)
+
+
+def _lock(path: Path) -> tuple[int | None, bool]:
+    """Open (creating it if need be) and lock the store file for this process.
+
+    Returns:
+        (the locked descriptor, or None where there are no advisory locks; whether this call
+        created the file).
+
+    Raises:
+        RealPenError: the file cannot be opened for writing, or another server holds it.
+    """
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            fd, created = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o666), True
+        except FileExistsError:
+            fd, created = os.open(path, os.O_RDWR), False
+    except OSError as error:
+        raise fail(path, f"cannot open or create the stroke store here "
+                         f"({error.strerror or error})") from None
+    if fcntl is None:
+        os.close(fd)
+        return None, created
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise fail(path, "is in use by another RealPen server; stop it or use another store "
+                         "file") from None
+    return fd, created
+
+
 class StrokeRef(tuple):
-    """A stroke found by its page and number: ``(stroke_id, end_reason)``."""
+    """A stroke found by its page and number: ``(stroke_id, end_reason, pen, modality)``."""
 
     __slots__ = ()
 
@@ -182,6 +233,14 @@ class StrokeRef(tuple):
     @property
     def end_reason(self) -> str | None:
         return self[1]
+
+    @property
+    def pen(self) -> str:
+        return self[2]
+
+    @property
+    def modality(self) -> str:
+        return self[3]
 
 
 class StrokeStore:
@@ -195,21 +254,23 @@ class StrokeStore:
     def __init__(self, path: str | os.PathLike, checkpoint_s: float = CHECKPOINT_S,
                  wal_checkpoint_bytes: int = WAL_CHECKPOINT_BYTES):
         self.path = Path(path)
-        self.created = not self.path.exists()  # this store made the file (see discard)
-        self._lock_fd: int | None = None
+        _check_place(self.path, create=True)
+        # The lock comes first: files are only ever removed (a failed start) by their owner,
+        # and ``created`` is decided by O_EXCL, not by a check another process could race.
+        self._lock_fd, self.created = _lock(self.path)
+        self._db = None
         try:
             self._db = _connect(self.path, create=True)
-            self._take_lock()
             self.recovered = self._close_crashed_strokes()
+            self._db.execute("PRAGMA wal_autocheckpoint=0")
+            self._db.execute(f"PRAGMA journal_size_limit={wal_checkpoint_bytes}")
         except BaseException:
-            self._release_lock()
-            if getattr(self, "_db", None) is not None:
+            if self._db is not None:
                 self._db.close()
             if self.created:
                 _remove_store_files(self.path)
+            self._release_lock()
             raise
-        self._db.execute("PRAGMA wal_autocheckpoint=0")
-        self._db.execute(f"PRAGMA journal_size_limit={wal_checkpoint_bytes}")
         self._checkpoint_s = checkpoint_s
         self._wal_checkpoint_bytes = wal_checkpoint_bytes
         self.largest_wal = 0  # bytes: the largest journal seen before a checkpoint
@@ -222,18 +283,6 @@ class StrokeStore:
         self._writer.start()
 
     # ---- ownership and recovery ---------------------------------------------------------
-
-    def _take_lock(self) -> None:
-        if fcntl is None:
-            return
-        fd = os.open(self.path, os.O_RDONLY)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            raise fail(self.path, "is in use by another RealPen server; stop it or use "
-                                  "another store file") from None
-        self._lock_fd = fd
 
     def _release_lock(self) -> None:
         if self._lock_fd is not None:
@@ -269,10 +318,11 @@ class StrokeStore:
 
     def _submit(self, operation: Callable, *args) -> Future:
         future: Future = Future()
-        if self._closed:
-            future.set_exception(sqlite3.ProgrammingError("the stroke store is closed"))
-            return future
-        self._queue.put((future, operation, args))
+        with self._close_lock:  # nothing is queued behind the writer's stop
+            if self._closed:
+                future.set_exception(sqlite3.ProgrammingError("the stroke store is closed"))
+            else:
+                self._queue.put((future, operation, args))
         return future
 
     def _write_loop(self) -> None:
@@ -291,42 +341,52 @@ class StrokeStore:
                     item = self._queue.get_nowait()
                 except queue.Empty:
                     break
-            if batch:
-                self._write_batch(db, batch)
-            if stopping or time.monotonic() - last_checkpoint >= self._checkpoint_s or \
-                    self._wal_size() >= self._wal_checkpoint_bytes:
-                self._checkpoint(db)
-                last_checkpoint = time.monotonic()
+            try:
+                if batch:
+                    self._write_batch(db, batch)
+                if stopping or time.monotonic() - last_checkpoint >= self._checkpoint_s or \
+                        self._wal_size() >= self._wal_checkpoint_bytes:
+                    self._checkpoint(db)
+                    last_checkpoint = time.monotonic()
+            except Exception as error:  # a bug here must not stop every later write
+                log.exception("%s: stroke store writer", self.path)
+                for future, _, _ in batch:
+                    _resolve(future, error=error)
 
     def _write_batch(self, db: sqlite3.Connection, batch: list) -> None:
+        """Run a batch's operations in one transaction; resolve every future, whatever fails.
+
+        An operation's own error rolls back that operation only. An error of the transaction
+        itself (BEGIN cannot get the lock, the disk is full at COMMIT) rolls back all, and every
+        operation of the batch gets it. A caller that stopped waiting (a cancelled future) does
+        not cancel its write: a pen-up queued by a closing connection is still recorded.
+        """
         outcomes = []
         try:
             db.execute("BEGIN IMMEDIATE")
             for future, operation, args in batch:
-                if not future.set_running_or_notify_cancel():
-                    continue
+                future.set_running_or_notify_cancel()
                 db.execute("SAVEPOINT operation")
                 try:
                     outcomes.append((future, operation(db, *args), None))
                 except Exception as error:  # this operation only; the batch goes on
+                    if not db.in_transaction:  # SQLite aborted the whole transaction
+                        raise
                     db.execute("ROLLBACK TO operation")
                     outcomes.append((future, None, error))
                 db.execute("RELEASE operation")
             db.execute("COMMIT")
-        except sqlite3.Error as error:  # the commit failed (disk full, I/O): nothing stored
+        except Exception as error:  # nothing of the batch is stored
             log.error("%s: stroke store: %s", self.path, error)
-            with contextlib.suppress(sqlite3.Error):
-                db.execute("ROLLBACK")
+            if db.in_transaction:
+                with contextlib.suppress(sqlite3.Error):
+                    db.execute("ROLLBACK")
             self._t0.clear()
             for future, _, _ in batch:
-                if future.running():
-                    future.set_exception(error)
+                _resolve(future, error=error)
             return
         for future, value, error in outcomes:
-            if error is None:
-                future.set_result(value)
-            else:
-                future.set_exception(error)
+            _resolve(future, value, error)
 
     def _wal_size(self) -> int:
         try:
@@ -337,12 +397,23 @@ class StrokeStore:
         return size
 
     def _checkpoint(self, db: sqlite3.Connection) -> None:
-        """Copy the journal into the database and truncate it (the writer is idle here)."""
+        """Copy the journal into the database and truncate it (the writer is idle here).
+
+        Readers (an export, a database browser) are never waited for: with one open the
+        journal cannot be reset, so the copy is done as far as it can go (PASSIVE) and the
+        truncation is tried again next time; meanwhile the writes go on.
+        """
         self._wal_size()
         try:
-            db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-        except sqlite3.Error as error:  # e.g. a reader in another process: next round
+            db.execute("PRAGMA busy_timeout=0")
+            busy = db.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()[0]
+            if busy:
+                db.execute("PRAGMA wal_checkpoint(PASSIVE)")
+        except sqlite3.Error as error:
             log.debug("checkpoint: %s", error)
+        finally:
+            with contextlib.suppress(sqlite3.Error):
+                db.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
 
     # ---- operations (run on the writer thread, inside a transaction) --------------------
 
@@ -371,8 +442,8 @@ class StrokeStore:
             if found is None:
                 raise KeyError(f"no stroke with id {stroke_id}")
             t0 = self._t0[stroke_id] = found[0]
-        if first is None:  # no numbering from the page: append after what is stored
-            first = db.execute("SELECT sample_count FROM strokes WHERE id=?",
+        if first is None:  # no numbering from the page: after the last number stored
+            first = db.execute("SELECT COALESCE(MAX(seq) + 1, 0) FROM samples WHERE stroke_id=?",
                                (stroke_id,)).fetchone()[0]
         cursor = db.executemany(_INSERT_SAMPLE, [(stroke_id, first + i, s[0] - t0, *s[1:])
                                                  for i, s in enumerate(rows)])
@@ -400,9 +471,9 @@ class StrokeStore:
 
     @staticmethod
     def _find(db, page: str, page_stroke: int) -> StrokeRef | None:
-        row = db.execute("SELECT id, end_reason FROM strokes WHERE page=? AND page_stroke=?",
-                         (page, page_stroke)).fetchone()
-        return None if row is None else StrokeRef((int(row[0]), row[1]))
+        row = db.execute("SELECT id, end_reason, pen, modality FROM strokes WHERE page=? AND "
+                         "page_stroke=?", (page, page_stroke)).fetchone()
+        return None if row is None else StrokeRef((int(row[0]), *row[1:]))
 
     @staticmethod
     def _count(db) -> tuple[int, int]:
@@ -478,9 +549,9 @@ class StrokeStore:
         with self._close_lock:
             if self._closed:
                 return
-            self._submit(self._end_all, "shutdown")
+            self._queue.put((Future(), self._end_all, ("shutdown",)))
+            self._queue.put(_STOP)
             self._closed = True
-        self._queue.put(_STOP)
         self._writer.join()
         self._db.close()
         self._release_lock()

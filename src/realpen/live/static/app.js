@@ -112,6 +112,8 @@ Object.defineProperties(state, {
 const link = new Link(
   withToken(`${window.location.protocol === 'https:' ? 'wss' : 'ws'}://${window.location.host}/ws`),
   { client: `realpen-page/1 ${navigator.userAgent}`.slice(0, 200), onChange: scheduleStatus });
+// After a reload in this tab the page is the same page: its stroke numbers go on from its last.
+state.stroke = link.lastStroke;
 
 const soundOn = () => state.modality === 'auditory' || state.modality === 'auditory-tactile';
 const tactileOn = () => state.modality === 'tactile' || state.modality === 'auditory-tactile';
@@ -137,7 +139,10 @@ function apply(samples) {
     link.send({ type: 'gain', stroke: state.stroke, t: last.t, target });
     lastSentTarget = target;
   }
-  const limit = (state.config && state.config.max_samples) || 512;
+  // Batches stay under the server's message size too: a sample's JSON is at most ~200 bytes.
+  const config = state.config || {};
+  const limit = Math.min(config.max_samples || 512,
+    Math.floor((config.max_message_bytes || 65536) / 200));
   for (let i = 0; i < samples.length; i += limit) {
     const batch = samples.slice(i, i + limit);
     // `index` numbers the samples within the stroke: a batch sent again is stored once.

@@ -5,12 +5,17 @@
 // messages are in flight; the rest wait in order (the server reads one message at a time, so
 // a page that writes faster than the server stores simply waits here). When the socket closes,
 // what was in flight goes back to the front of the queue and is sent again after the reconnect,
-// which names the page (`hello.page`) so the server stores each stroke and sample once. A
-// message the store could not record (`error` with code `store`) is sent again a little later.
+// which names the page (`hello.page`) so the server stores each stroke and sample once. When the
+// store cannot record a message (`error` with code `store`), the server closes the socket, and
+// that message and everything after it go again after the reconnect, in order.
+//
+// A reload keeps all of it: when the page goes away, its id, its last stroke number and what is
+// not acknowledged are kept in sessionStorage (this tab only), and the reloaded page sends them
+// first, as the same page. Closing the tab while messages are unacknowledged asks first.
 
 const WINDOW = 64;
 const RTT_KEPT = 256;
-const STORE_RETRY_MS = 1000;
+const SAVED = 'realpen.link';
 
 function randomId() {
   // crypto.getRandomValues works on plain http (a tablet on the LAN); randomUUID does not.
@@ -25,12 +30,42 @@ export class Link {
     this.onChange = onChange || (() => {});
     this.page = randomId();
     this.seq = 0;
+    this.lastStroke = 0;       // the highest stroke number sent
     this.outbox = [];          // [seq, text] not yet sent on the current socket, in seq order
     this.inFlight = new Map(); // seq → [text, sentAt] sent and not yet acknowledged
-    this.stats = { state: 'connecting', sent: 0, acked: 0, errors: 0, resent: 0, unacked: 0,
-      lastError: null, rtt: [], session: null, lastStrokeId: null, page: this.page };
+    this.hellos = new Set();
+    this.restore();
+    this.stats = { state: 'connecting', sent: 0, acked: 0, errors: 0, resent: this.outbox.length,
+      unacked: this.outbox.length, lastError: null, rtt: [], session: null, lastStrokeId: null,
+      page: this.page };
+    window.addEventListener('pagehide', () => this.save());
+    window.addEventListener('beforeunload', (event) => {
+      if (this.stats.unacked > 0) event.preventDefault(); // the browser asks "leave the page?"
+    });
     this.retry = 500;
     this.connect();
+  }
+
+  /** What a previous load of this page in this tab left: its id, strokes and unsent messages. */
+  restore() {
+    let saved = null;
+    try { saved = JSON.parse(sessionStorage.getItem(SAVED)); } catch { saved = null; }
+    if (!saved || typeof saved.page !== 'string') return;
+    this.page = saved.page;
+    this.seq = saved.seq || 0;
+    this.lastStroke = saved.lastStroke || 0;
+    this.outbox = Array.isArray(saved.outbox) ? saved.outbox : [];
+  }
+
+  save() {
+    const unsent = [...this.inFlight.entries()]
+      .filter(([seq]) => !this.hellos.has(seq))
+      .map(([seq, [text]]) => [seq, text]);
+    const outbox = [...unsent, ...this.outbox].sort((a, b) => a[0] - b[0]);
+    try {
+      sessionStorage.setItem(SAVED, JSON.stringify({ page: this.page, seq: this.seq,
+        lastStroke: this.lastStroke, outbox }));
+    } catch (error) { console.warn(`realpen: could not keep unsent messages: ${error}`); }
   }
 
   connect() {
@@ -68,6 +103,7 @@ export class Link {
   /** Send a message (its `seq` is added); returns the seq. It is kept until acknowledged. */
   send(message) {
     const seq = this.seq++;
+    if (Number.isInteger(message.stroke)) this.lastStroke = Math.max(this.lastStroke, message.stroke);
     this.outbox.push([seq, JSON.stringify({ ...message, seq })]);
     this.pump();
     this.updateUnacked();
@@ -92,7 +128,9 @@ export class Link {
     let message;
     try { message = JSON.parse(data); } catch { return; }
     const entry = this.inFlight.get(message.seq);
-    this.inFlight.delete(message.seq);
+    // A message the store could not record stays in flight: the server closes the socket, and
+    // it goes again with everything after it.
+    if (!(message.type === 'error' && message.code === 'store')) this.inFlight.delete(message.seq);
     if (message.type === 'ack') {
       this.stats.acked += 1;
       if (entry !== undefined) {
@@ -105,14 +143,6 @@ export class Link {
       this.stats.errors += 1;
       this.stats.lastError = message;
       console.warn(`realpen server: ${message.code}: ${message.message}`);
-      if (message.code === 'store' && entry !== undefined) {
-        const again = [message.seq, entry[0]];
-        setTimeout(() => {
-          this.outbox.unshift(again);
-          this.outbox.sort((a, b) => a[0] - b[0]);
-          this.pump();
-        }, STORE_RETRY_MS);
-      }
     }
     this.pump();
     this.updateUnacked();
