@@ -78,3 +78,24 @@ def assert_clean_failure(result: subprocess.CompletedProcess, names: str) -> Non
     assert len(lines) == 1, result.stderr
     assert names in lines[0], lines[0]
     assert "Traceback" not in result.stderr
+
+
+# ---- the live app in-process (tests/test_live_*.py) ------------------------------------------
+
+@pytest.fixture
+def store_path(tmp_path):
+    """Where the in-process live app's stroke store goes."""
+    return tmp_path / "strokes.sqlite3"
+
+
+@pytest.fixture
+def client(tmp_path, store_path, monkeypatch):
+    """The live app in-process (FastAPI's TestClient), loopback settings, a fresh store."""
+    from fastapi.testclient import TestClient
+
+    from realpen.live.app import LiveSettings, create_app
+
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    app = create_app(LiveSettings.loopback(store=store_path))
+    with TestClient(app, base_url="http://127.0.0.1") as test_client:
+        yield test_client

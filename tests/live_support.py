@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import os
 import re
 import select
 import signal
+import sqlite3
 import subprocess
 import sys
 import time
@@ -21,6 +23,20 @@ from realpen.exports.base import resample_loop
 from realpen.profile import PenProfile, resolve_profile, save_profile
 
 URL_LINE = re.compile(r"RealPen live: (http://\S+)")
+LOCAL = "http://127.0.0.1"
+WS = "ws://127.0.0.1/ws"
+
+
+def talk(ws, message: dict) -> dict:
+    """Send one message on a TestClient WebSocket and return the reply."""
+    ws.send_text(json.dumps(message))
+    return json.loads(ws.receive_text())
+
+
+def rows(path, sql: str, *args) -> list[tuple]:
+    """The rows of ``sql`` on the SQLite file at ``path``."""
+    with sqlite3.connect(path) as db:
+        return db.execute(sql, args).fetchall()
 
 
 @dataclass

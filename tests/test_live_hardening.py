@@ -18,6 +18,7 @@ import time
 
 import pytest
 from conftest import run_cli
+from live_support import LOCAL, WS, rows, talk
 
 pytest.importorskip("fastapi", reason="the live app needs the server dependencies")
 
@@ -33,34 +34,9 @@ from realpen.live.server import bind, server_config  # noqa: E402
 from realpen.live.store import StrokeStore  # noqa: E402
 from realpen.profile import resolve_profile  # noqa: E402
 
-LOCAL = "http://127.0.0.1"
-WS = "ws://127.0.0.1/ws"
 PAGE = "page-0123456789abcdef"
 STROKE_FIELDS = dict(pen="pencil", profile_version="0" * 12, modality="none", ink="visible",
                      pointer_type="pen", px_per_mm=4.0, calibrated=False)
-
-
-@pytest.fixture
-def store_path(tmp_path):
-    return tmp_path / "strokes.sqlite3"
-
-
-@pytest.fixture
-def client(tmp_path, store_path, monkeypatch):
-    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
-    app = create_app(LiveSettings.loopback(store=store_path))
-    with TestClient(app, base_url=LOCAL) as test_client:
-        yield test_client
-
-
-def talk(ws, message) -> dict:
-    ws.send_text(json.dumps(message))
-    return json.loads(ws.receive_text())
-
-
-def rows(path, sql, *args):
-    with sqlite3.connect(path) as db:
-        return db.execute(sql, args).fetchall()
 
 
 def batch(first: int, n: int = 4) -> list[dict]:

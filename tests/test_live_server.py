@@ -7,7 +7,6 @@ import io
 import json
 import signal
 import socket
-import sqlite3
 import warnings
 
 import numpy as np
@@ -21,7 +20,15 @@ with warnings.catch_warnings():  # starlette's note about a future httpx success
     from fastapi.testclient import TestClient  # noqa: E402
 
 from conftest import assert_clean_failure, run_cli  # noqa: E402
-from live_support import low_rate_profile, serve, stroke_messages  # noqa: E402
+from live_support import (  # noqa: E402
+    LOCAL,
+    WS,
+    low_rate_profile,
+    rows,
+    serve,
+    stroke_messages,
+    talk,
+)
 
 from realpen.errors import RealPenError  # noqa: E402
 from realpen.exports.base import resample_loop  # noqa: E402
@@ -32,35 +39,9 @@ from realpen.live.store import CSV_COLUMNS, StrokeStore, export_csv  # noqa: E40
 from realpen.profile import load_profile, resolve_profile, save_profile  # noqa: E402
 from realpen.sound.stroke import load_trajectory  # noqa: E402
 
-LOCAL = "http://127.0.0.1"
-WS = "ws://127.0.0.1/ws"
-
-
-@pytest.fixture
-def store_path(tmp_path):
-    return tmp_path / "strokes.sqlite3"
-
-
-@pytest.fixture
-def client(tmp_path, store_path, monkeypatch):
-    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
-    app = create_app(LiveSettings.loopback(store=store_path))
-    with TestClient(app, base_url=LOCAL) as test_client:
-        yield test_client
-
-
-def talk(ws, message) -> dict:
-    ws.send_text(json.dumps(message))
-    return json.loads(ws.receive_text())
-
 
 def device_log(client) -> list[dict]:
     return client.get("/api/device/log").json()["entries"]
-
-
-def rows(store_path, sql, *args):
-    with sqlite3.connect(store_path) as db:
-        return db.execute(sql, args).fetchall()
 
 
 # ---- HTTP -----------------------------------------------------------------------------------
