@@ -283,6 +283,8 @@ CORPUS = [
     bad("sound-render-smoothing-1e12", f"{RENDER} --coupling changed.json", "changed.json",
         coupling_with(smoothing_ms=1e12)),
     bad("export-rate-1e9", "export pencil -f wav -o p.wav --rate 1000000000", "--rate"),
+    bad("export-empty-profile-name", ["export", "", "-f", "wav", "-o", "p.wav"], "empty"),
+    bad("profile-show-empty-name", ["profile", "show", ""], "empty"),
     bad("export-rate-1", "export pencil -f c-header -o p.h --rate 1", "--rate"),
     bad("export-repeats-1e9", "export pencil -f haptic -o p.haptic --repeats 1000000000",
         "--repeats"),

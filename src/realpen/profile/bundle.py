@@ -432,6 +432,8 @@ def load_profile(path: str | os.PathLike) -> PenProfile:
             the bundle's bytes).
     """
     text = os.fspath(path)
+    if not text.strip():  # Path("") is the current folder, which is not what was meant
+        raise fail("profile", "the name or path is empty; give a pen's name or a bundle")
     path = Path(path)
     try:
         exists = path.exists()

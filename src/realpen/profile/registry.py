@@ -72,6 +72,8 @@ def resolve_profile(name_or_path: str | os.PathLike,
         RealPenError: no such profile (the known names are listed), or a broken bundle.
     """
     name_or_path = os.fspath(name_or_path)
+    if not os.fspath(name_or_path).strip():  # Path("") is the current folder: not meant
+        raise fail("profile", "the name or path is empty; give a pen's name or a bundle")
     candidate = Path(name_or_path)
     try:
         exists = candidate.exists()
