@@ -402,9 +402,15 @@ def test_the_device_log_comes_in_pages(tmp_path, monkeypatch):
 
 @pytest.fixture
 def uvicorn_server(tmp_path, monkeypatch):
-    """The live app under uvicorn with the server's own configuration, head timeout 0.5 s."""
+    """The live app under uvicorn with the server's own configuration, head timeout 0.5 s,
+    and a route with a bug (``/boom``)."""
     monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
     app = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3"))
+
+    def boom():
+        raise RuntimeError("a bug")
+
+    app.add_api_route("/boom", boom)
     sock = bind("127.0.0.1", 0)
     server = uvicorn.Server(server_config(app, head_timeout_s=0.5))
     thread = threading.Thread(target=lambda: asyncio.run(server.serve(sockets=[sock])))
@@ -438,6 +444,17 @@ def test_slow_and_silent_clients_are_timed_out(uvicorn_server):
         polite.sendall(b"GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
         polite.settimeout(5.0)
         assert polite.recv(1024).startswith(b"HTTP/1.1 200")
+
+
+def test_even_the_page_of_an_unexpected_error_carries_the_headers(uvicorn_server):
+    import httpx
+
+    response = httpx.get(f"http://127.0.0.1:{uvicorn_server}/boom")
+    assert response.status_code == 500
+    assert response.headers["x-frame-options"] == "DENY"
+    assert "frame-ancestors 'none'" in response.headers["content-security-policy"]
+    ok = httpx.get(f"http://127.0.0.1:{uvicorn_server}/api/status")
+    assert ok.headers.get_list("x-frame-options") == ["DENY"]  # not twice
 
 
 def test_a_frame_that_is_not_utf8_is_logged_in_one_line(uvicorn_server, caplog):

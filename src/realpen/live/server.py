@@ -21,6 +21,7 @@ import uvicorn
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
 from realpen.errors import ParameterError
+from realpen.live.auth import SecurityHeaders
 
 WS_MAX_FRAME = 1024 * 1024  # frames above this are refused by the protocol layer (close 1009)
 REQUEST_HEAD_TIMEOUT_S = 10.0
@@ -138,7 +139,9 @@ def server_config(app, log_level: str = "warning",
     The access log is off: in LAN mode every request line would carry the token.
     """
     http = type("TimedHttpProtocol", (TimedHttpProtocol,), {"head_timeout_s": head_timeout_s})
-    config = uvicorn.Config(app, log_level=log_level, access_log=False, lifespan="on",
+    # Outside the app as well: the 500 page of an unexpected error (made by Starlette's
+    # outermost middleware) gets the headers too. Headers already set are not repeated.
+    config = uvicorn.Config(SecurityHeaders(app), log_level=log_level, access_log=False, lifespan="on",
                             http=http, ws_max_size=WS_MAX_FRAME, ws_per_message_deflate=False,
                             ws_ping_interval=WS_PING_INTERVAL_S, ws_ping_timeout=WS_PING_TIMEOUT_S,
                             timeout_keep_alive=KEEP_ALIVE_S, limit_concurrency=MAX_CONNECTIONS,
