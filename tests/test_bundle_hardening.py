@@ -204,8 +204,8 @@ def zip_too_many_entries(good: Path, tmp: Path):
 
 
 def zip_declared_too_big(good: Path, tmp: Path):
-    # 16 MiB of WAV in 16 kB: over the limit as declared, refused before any byte is inflated.
-    stream, crc, size = deflate_repeated(wav_header(16 * MiB), bytes(MiB), 16)
+    # 80 MiB of WAV in 80 kB: over the limit as declared, refused before any byte is inflated.
+    stream, crc, size = deflate_repeated(wav_header(80 * MiB), bytes(MiB), 80)
     entry = ("tactile.wav", stream, crc, size, zipfile.ZIP_DEFLATED, 0)
     return handmade_zip(tmp / "big.zip", stored_entries(good, tactile_wav=entry)), \
         f"tactile.wav is declared {size:,} bytes; the limit is {MAX_WAV_BYTES:,}"
@@ -563,19 +563,19 @@ def test_the_catalogue_skips_bad_bundles_once_and_offers_the_rest(pencil, tmp_pa
 
 
 def test_the_catalogue_skips_a_loop_too_long_to_serve(pencil, tmp_path, monkeypatch):
-    """A 100 Hz tactile pattern is served at the sound's 48 kHz: 4,500 frames become 2,160,000,
+    """A 100 Hz tactile pattern is served at the sound's 48 kHz: 45,000 frames become 21,600,000,
     over the limit of a served WAV."""
     import dataclasses
 
     monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
-    pattern = dataclasses.replace(pencil.meta.tactile, rate=100, subpattern_ms=3000.0)
+    pattern = dataclasses.replace(pencil.meta.tactile, rate=100, subpattern_ms=30000.0)
     meta = pencil.meta.model_copy(update={"name": "slow", "tactile": pattern})
     slow = save_profile(PenProfile(meta, np.zeros(pattern.frames, np.float32), pencil.sound),
                         tmp_path / "pens" / "slow")
-    assert load_profile(slow).meta.tactile.frames == 4500  # a bundle within every limit
+    assert load_profile(slow).meta.tactile.frames == 45000  # a bundle within every limit
     catalog = Catalog([tmp_path / "pens"])
     assert catalog.names == list(BUNDLED_PENS)
-    assert catalog.skipped == [f"{slow}: its tactile pattern would be 2,160,000 frames served at "
+    assert catalog.skipped == [f"{slow}: its tactile pattern would be 21,600,000 frames served at "
                                f"48000 Hz; the limit is {MAX_WAV_FRAMES:,}"]
 
 

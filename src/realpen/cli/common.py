@@ -75,9 +75,9 @@ def check_outputs(*outputs: Path | None, force: bool, force_flag: str = "--force
         for label, source in sources.items():
             if same_file(out, source):
                 raise fail(out, f"would replace the {label} itself; name another file to write")
-            if source.is_dir() and out.resolve().is_relative_to(source.resolve()):
+            if source.is_dir() and resolved(out).is_relative_to(resolved(source)):
                 raise fail(out, f"lies inside the {label} {source}; write it elsewhere")
-            if folders and source.resolve().is_relative_to(out.resolve()):
+            if folders and resolved(source).is_relative_to(resolved(out)):
                 # A bundle folder is replaced whole, with whatever it holds.
                 raise fail(out, f"holds the {label} {source}; write the output elsewhere")
         if any(same_file(out, other) for other in given[:index]):
@@ -88,11 +88,23 @@ def check_outputs(*outputs: Path | None, force: bool, force_flag: str = "--force
             raise RealPenError(f"{out}: exists; pass {force_flag} to replace it")
 
 
+def resolved(path: Path) -> Path:
+    """``path`` with symbolic links followed.
+
+    Raises:
+        RealPenError: the links loop (Python 3.11 raises RuntimeError there, later ones OSError).
+    """
+    try:
+        return path.resolve()
+    except (RuntimeError, OSError):
+        raise fail(path, "cannot be followed: its symbolic links form a loop") from None
+
+
 def same_file(first: Path, second: Path) -> bool:
     """Whether two paths name one file: the same resolved path (symbolic links followed), or,
     when both exist, the same file on disk (hard links, bind mounts, case-insensitive file
     systems)."""
-    if first.resolve() == second.resolve():
+    if resolved(first) == resolved(second):
         return True
     try:
         return first.exists() and second.exists() and os.path.samefile(first, second)

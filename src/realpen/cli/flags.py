@@ -79,6 +79,9 @@ COMMAND_FLAGS: dict[str, dict[str, str]] = {
         "build_pattern.unit_ms": "--unit-ms",
         "build_profile.unit_ms": "--sound-unit-ms",
         "build_profile.crossfade_ms": "--sound-crossfade-ms",
+        # The sound is resampled to 48 kHz; when that is too much, the recording is at fault.
+        "load_sound.rate": "--sound",
+        "_mono.rate": "--sound",
     },
 }
 

@@ -113,7 +113,10 @@ def export(
     from realpen.live.store import export_csv
 
     store = store or default_store()
-    check_outputs(output, force=force, inputs={"stroke store": store})
+    # The store's journal files are part of it: writing over one would lose what it holds.
+    check_outputs(output, force=force, inputs={
+        "stroke store": store, **{f"stroke store's {suffix} file": Path(f"{store}{suffix}")
+                                  for suffix in ("-wal", "-shm", "-journal")}})
     strokes, rows = export_csv(store, output, stroke)
     console.print(f"wrote {output}: {rows} samples of {strokes} strokes from {store}",
                   highlight=False)

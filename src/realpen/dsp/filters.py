@@ -124,9 +124,10 @@ def highpass(recording: Recording, cutoff_hz: float = 30.0, order: int = 4) -> R
         return recording
     if cutoff_hz >= nyquist:
         # The cutoff is what the user chose; the recording's rate is a fact.
-        raise ParameterError("cutoff_hz", f"the rate of {recording.source} ({recording.rate:g} "
-                                          f"Hz) is too low for a {cutoff_hz:g} Hz high-pass "
-                                          f"(Nyquist {nyquist:g} Hz)")
+        raise ParameterError("cutoff_hz", f"a {cutoff_hz:g} Hz high-pass needs a rate above "
+                                          f"{2 * cutoff_hz:g} Hz; {recording.source} is at "
+                                          f"{recording.rate:g} Hz here (after any resampling), "
+                                          f"so its rate is too low (Nyquist {nyquist:g} Hz)")
     sos = signal.butter(order, cutoff_hz, btype="highpass", fs=recording.rate, output="sos")
     padlen = min(3 * (2 * len(sos) + 1), recording.samples.shape[0] - 1)
     filtered = signal.sosfiltfilt(sos, recording.samples, axis=0, padlen=max(padlen, 0))

@@ -30,9 +30,10 @@ MAX_UNIT_MS = 60_000.0
 """The longest unit sequence and sub-pattern (ms): one minute; the method's are 100 and
 1500 ms."""
 
-MAX_UNITS = 2**18
-"""The most unit sequences one analysis splits a signal into (262 144: over 7 h of 100 ms
-units). Each holds ``top`` frequencies and powers and 24 band levels."""
+MAX_UNITS = 2**21
+"""The most unit sequences one analysis splits a signal into (2 097 152: over 58 h of 100 ms
+units, more than any recording RealPen reads holds at the default unit). Each holds ``top``
+frequencies and powers and 24 band levels: at most a few GB at ``top`` = 100."""
 
 MAX_UNIT_SAMPLES = 2**20
 """The most samples in one unit sequence (1 048 576: 13 min at 1.344 kHz, 2.6 s at 400 kHz).

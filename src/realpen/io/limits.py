@@ -29,15 +29,16 @@ __all__ = ["MIN_RATE_HZ", "MAX_RATE_HZ", "MAX_CHANNELS", "MAX_FRAMES", "MAX_JSON
 MIN_RATE_HZ = 100
 """The lowest sampling rate (Hz) of a signal read or written: an accelerometer for a pen runs at
 1 kHz or more; a header that says 1 Hz is damaged."""
-MAX_RATE_HZ = 400_000
-"""The highest sampling rate (Hz) of a signal read or written (384 kHz is audio's highest)."""
+MAX_RATE_HZ = 384_000
+"""The highest sampling rate (Hz) of a signal read, analysed or written: audio's highest common
+rate (the tactile, sound and export writers use this same number)."""
 MAX_CHANNELS = 32
 """The most channels a recording may have (a pen's accelerometer has 3, a microphone 1–2)."""
-MAX_FRAMES = 2**25
-"""The most samples a signal may hold, over all its channels (33.5 M: 256 MiB as float64; 6.9 h
-of one 1.344 kHz accelerometer axis, 2.3 h of three, 11.6 min of 48 kHz mono sound). The
-analysis holds about 100 bytes per sample at its peak, so no recording makes it use more than
-about 3.5 GB."""
+MAX_FRAMES = 2**26
+"""The most samples a signal may hold, over all its channels (67 M: 512 MiB as float64; 13.9 h
+of one 1.344 kHz accelerometer axis, 4.6 h of three, 23 min of 48 kHz mono sound, 11.6 min of
+stereo). The analysis holds 50–100 bytes per sample at its peak, so no recording makes it use
+more than about 3–6 GB."""
 MAX_JSON_BYTES = 4 * 1024 * 1024
 """The largest JSON document read (bytes): a profile.json is a few kB."""
 MAX_JSON_DEPTH = 32
@@ -207,7 +208,7 @@ def require_rate(parameter: str, rate: float) -> None:
     >>> require_rate("rate", 1)
     Traceback (most recent call last):
     ...
-    realpen.errors.ParameterError: rate: must be between 100 and 400,000 Hz, got 1
+    realpen.errors.ParameterError: rate: must be between 100 and 384,000 Hz, got 1
     """
     if isinstance(rate, numbers.Integral) and not isinstance(rate, bool) and abs(rate) > MAX_RATE_HZ:
         # Before require_number, which converts to float: 10**400 would overflow.

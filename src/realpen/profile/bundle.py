@@ -73,7 +73,7 @@ archiver's leftovers (``__MACOSX/``) fit, while the central directory of a zip o
 entries is refused before any entry is read."""
 MAX_ZIP_BYTES = sum(MAX_FILE_BYTES.values()) + 1024 * 1024
 """The largest bundle ``.zip`` read (bytes): its three files stored uncompressed at their limits,
-plus 1 MiB for headers and leftovers (about 21 MiB)."""
+plus 1 MiB for headers and leftovers (about 133 MiB)."""
 
 # Entries RealPen inflates: what save_profile writes and every archiver's default. Others
 # (bzip2, lzma — whose header may ask for a huge dictionary —, deflate64, …) are refused.

@@ -73,11 +73,12 @@ NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 PROFILE_JSON, TACTILE_WAV, SOUND_WAV = "profile.json", "tactile.wav", "sound.wav"
 BUNDLE_FILES = (PROFILE_JSON, TACTILE_WAV, SOUND_WAV)
 
-MAX_WAV_FRAMES = 2**21
+MAX_WAV_FRAMES = 2**24
 """The most frames (samples; the WAVs are mono) of a bundle's ``tactile.wav`` or ``sound.wav``:
-2,097,152, 8 MiB as 32-bit float. A tactile pattern is 1.5 s (12,000 frames at 8 kHz; 576,000
-at 384 kHz) and a sound unit 300 ms (14,400 at 48 kHz), so this leaves room for long or
-high-rate pens while a forged header cannot ask for gigabytes."""
+16,777,216, 64 MiB as 32-bit float — the longest tactile pattern RealPen synthesises
+(:data:`realpen.tactile.synthesis.MAX_PATTERN_FRAMES`, the same number), so every pattern and
+every sound unit (at most 60 s) it builds can be bundled, while a forged header cannot ask for
+gigabytes. A method's pattern is 1.5 s (12,000 frames at 8 kHz) and its sound unit 300 ms."""
 MAX_WAV_BYTES = 4 * MAX_WAV_FRAMES + 64 * 1024
 """The largest ``tactile.wav`` or ``sound.wav`` read (bytes): :data:`MAX_WAV_FRAMES` frames of
 32-bit float plus 64 KiB for the header and chunks (``fmt``, ``smpl``, ``LIST``)."""

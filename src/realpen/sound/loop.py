@@ -60,6 +60,7 @@ from realpen import __version__
 from realpen.dsp.filters import resample
 from realpen.errors import ParameterError, fail
 from realpen.io.files import read_smpl_loop, wav_bytes, write_wav
+from realpen.io.limits import MAX_RATE_HZ
 from realpen.io.recording import Recording, load_recording
 
 if TYPE_CHECKING:
@@ -85,7 +86,7 @@ SILENT_DBFS = -90.0     # a whole recording quieter than this is silence (16-bit
 REFERENCE_DBFS = -20.0  # RMS of a normalised loop: the level that coupling gain 1 plays at
 MAX_LEVEL_DBFS = 0.0    # highest loop level (RMS) accepted
 MIN_RATE = 8000.0       # Hz; below it the 100 Hz–0.45·rate bands of the seam measures collapse
-MAX_RATE = 384000.0     # Hz; the highest common audio rate
+MAX_RATE = float(MAX_RATE_HZ)  # Hz; the highest common audio rate
 FLOOR_DB = 80.0         # band levels further below the loud frames are treated as equal
 MAX_MS = 60000.0
 """The longest length (ms) a loop unit, crossfade, grain or texture may have: a minute. Every

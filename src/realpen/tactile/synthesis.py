@@ -23,7 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from realpen.errors import ParameterError, require_choice, require_number
-from realpen.io.limits import MIN_RATE_HZ
+from realpen.io.limits import MAX_RATE_HZ, MIN_RATE_HZ
 
 __all__ = ["BOUNDARIES", "MIN_RATE", "MAX_RATE", "MAX_PATTERN_FRAMES", "check_rate",
            "check_frames", "synthesize", "subpattern_samples", "fade_samples",
@@ -31,7 +31,7 @@ __all__ = ["BOUNDARIES", "MIN_RATE", "MAX_RATE", "MAX_PATTERN_FRAMES", "check_ra
 
 BOUNDARIES = ("crossfade", "hard")
 MIN_RATE = MIN_RATE_HZ  # Hz; the lowest rate of any signal RealPen writes
-MAX_RATE = 384_000  # Hz; the highest common audio rate (a pattern is synthesised whole)
+MAX_RATE = MAX_RATE_HZ  # Hz; the highest common audio rate (a pattern is synthesised whole)
 MAX_PATTERN_FRAMES = 2**24
 """The most samples in one loop of a tactile pattern (16 777 216: 35 min at 8 kHz, 44 s at
 384 kHz; 128 MiB as float64). The method's loop is 1.5 s, 12 000 samples at 8 kHz."""
