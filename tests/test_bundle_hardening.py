@@ -692,3 +692,47 @@ def test_reads_are_bounded_even_when_a_size_lies(good, tmp_path, monkeypatch):
                                            f"{MAX_JSON_BYTES:,} bytes"):
         load_profile(bundle)
     assert asked == [MAX_JSON_BYTES + 1]
+
+
+# --- found in review: slow, huge or unwritable documents -------------------------------------
+
+def test_an_unterminated_string_of_escaped_quotes_is_refused_at_once(good):
+    import time
+
+    write_document(good, '{"tool": "' + '\\"' * 1_500_000)
+    start = time.perf_counter()
+    with pytest.raises(RealPenError, match="not valid JSON"):
+        load_profile(good)
+    assert time.perf_counter() - start < 10  # was quadratic: hours at this size
+
+
+def test_a_document_of_too_many_values_is_refused_before_validation(good):
+    document = read_document(good)
+    document["tactile"]["subpatterns"] = [[0] * 600_000]
+    write_document(good, document)
+    with pytest.raises(RealPenError, match="holds more than 524,288 values"):
+        load_profile(good)
+
+
+def test_a_lone_surrogate_is_refused_and_the_catalogue_skips_it(good, tmp_path, monkeypatch):
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    document = read_document(good)
+    write_document(good, json.dumps(document).replace('"tool": "', '"tool": "\\ud800', 1))
+    with pytest.raises(RealPenError, match="not valid Unicode"):
+        load_profile(good)
+    catalog = Catalog([good.parent])
+    assert catalog.names == list(BUNDLED_PENS) and len(catalog.skipped) == 1
+    assert len(json.dumps(catalog.to_json())) > 0  # the others are served
+
+
+def test_numbers_that_load_but_overflow_later_are_refused_or_ignored(good, tmp_path):
+    document = read_document(good)
+    document["tactile"]["subpatterns"][0][0]["frequency_hz"] = 1e308
+    write_document(good, document)
+    with pytest.raises(RealPenError, match="frequency_hz"):
+        load_profile(good)
+    document["tactile"]["subpatterns"][0][0]["frequency_hz"] = 175.0
+    document["provenance"]["tactile_parameters"]["selection_unit_ms"] = 1e-308
+    write_document(good, document)
+    result = run_cli("export", str(good), "-f", "wav", "-o", str(tmp_path / "p.wav"))
+    assert result.returncode == 0, result.stderr  # the odd provenance is not needed to export

@@ -455,3 +455,36 @@ def test_worst_files_are_refused_in_one_line_under_the_memory_limit(tmp_path, ma
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and path.name in lines[0] and limit in lines[0], result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_npz_header_length_is_bounded_before_numpy_reads_it(tmp_path):
+    """A .npy v2 header may declare 4 GiB; a deflate bomb would deliver it."""
+    import struct
+
+    path = tmp_path / "header.npz"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("samples.npy", b"\x93NUMPY\x02\x00" + struct.pack("<I", 10**8)
+                         + b" " * 10**8)  # 100 MB of header, ~100 kB on disk
+    assert path.stat().st_size < 1_000_000
+    with pytest.raises(RealPenError, match="100,000,000-byte .npy header; headers are limited"):
+        load_recording(path)
+
+
+def test_npz_values_that_take_no_bytes_are_refused(tmp_path):
+    """A '<U0' array of 10^30 items is 0 bytes: it passes any size limit but not a count."""
+    import io
+
+    header = f"{{'descr': '<U0', 'fortran_order': False, 'shape': ({10**30},), }}"
+    header = header.ljust(118) + "\n"
+    members = {"axes.npy": np.lib.format.magic(1, 0) + len(header).to_bytes(2, "little")
+               + header.encode()}
+    for key, value in (("samples", np.zeros((2000, 3))), ("rate", np.float64(1344.0))):
+        buffer = io.BytesIO()
+        np.save(buffer, value)
+        members[f"{key}.npy"] = buffer.getvalue()
+    path = tmp_path / "u0.npz"
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+    with pytest.raises(RealPenError, match="'axes' holds <U0 values, which take no bytes"):
+        load_recording(path)

@@ -276,6 +276,8 @@ def load_hatt(path: str | os.PathLike) -> HattModelSet:
         triangles = np.array([[int(v) for v in t] for t in tris], dtype=np.int64)
     except ValueError as error:
         raise fail(path, f"<tri> has a non-integer vertex index ({error})") from None
+    except OverflowError:
+        raise fail(path, "<tri> has a vertex index beyond any model's count") from None
     if root.find("numTri") is not None and number("numTri") != len(triangles):
         raise fail(path, f"<numTri> does not match the {len(triangles)} <tri> elements")
     if triangles.min() < 1 or triangles.max() > count:

@@ -15,12 +15,16 @@ Standard library only: the numpy-free parameter classes import it.
 
 from __future__ import annotations
 
-__all__ = ["MAX_TOP", "MAX_SUBPATTERNS", "MAX_UNIT_MS", "MAX_UNITS", "MAX_UNIT_SAMPLES",
+__all__ = ["MAX_COMPONENTS", "MAX_TOP", "MAX_SUBPATTERNS", "MAX_UNIT_MS", "MAX_UNITS", "MAX_UNIT_SAMPLES",
            "MIN_UNIT_SAMPLES", "MAX_SEED", "MAX_CAP_DB"]
 
 MAX_TOP = 100
 """The most principal frequencies per unit (``top``, N) and so the most components of one
 sub-pattern: the method uses 5–15. The analysis holds ``units × top`` of them."""
+
+MAX_COMPONENTS = 50_000
+"""The most components of one pattern in all (its sub-patterns' together): a profile's JSON
+must stay within :data:`realpen.io.limits.MAX_JSON_VALUES`; the method's pattern has 150."""
 
 MAX_SUBPATTERNS = 1000
 """The most consecutive units selected (``count``) and sub-patterns of a pattern (K): the

@@ -43,6 +43,10 @@ MAX_JSON_BYTES = 4 * 1024 * 1024
 """The largest JSON document read (bytes): a profile.json is a few kB."""
 MAX_JSON_DEPTH = 32
 """The deepest nesting of arrays and objects in a JSON document read."""
+MAX_JSON_VALUES = 2**19
+"""The most values (objects, arrays, numbers, strings) in a JSON document read: 524,288, more
+than the largest pattern RealPen writes holds (:data:`realpen.dsp.limits.MAX_COMPONENTS`
+components of 8 fields); a profile of the method's is about 1,500."""
 MAX_NUMBER_CHARS = 64
 """The longest number (characters) in a JSON document; 17 significant digits are all a float
 holds, and Python's int() on thousands of digits is quadratic."""
@@ -59,6 +63,8 @@ streams past, and at most :data:`MAX_FRAMES` numbers (row numbers included) are 
 MAX_NPZ_DIRECTORY_BYTES = 65_536
 """The largest zip directory of an NPZ file (bytes): a recording's NPZ holds a few arrays, and
 ``zipfile`` loads the whole directory (about 1 kB of memory an entry) when the file is opened."""
+MAX_NPY_HEADER_BYTES = 65_536
+"""The longest ``.npy`` header read (bytes) in an NPZ; numpy writes about 128."""
 MAX_NPZ_ARRAY_BYTES = 65_536
 """The largest array of an NPZ file other than its samples (bytes, as declared in its header):
 ``rate``, ``axes`` and ``units`` need a few dozen."""
@@ -74,7 +80,9 @@ MAX_MODEL_ORDER = 128
 polynomial roots cost the cube of the order."""
 
 # Strings are removed before brackets are counted: a "[" inside a string is not nesting.
-_JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
+# Possessive (*+), and an unterminated string matches too: otherwise every escaped quote of a
+# long unterminated string would start a rescan to its end (quadratic time).
+_JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*+"?', re.DOTALL)
 _LONG_NUMBER = re.compile(rb"-?[0-9][0-9.eE+-]{%d,}" % MAX_NUMBER_CHARS)
 
 
@@ -136,9 +144,34 @@ def load_json(source: bytes | str | os.PathLike, what: object | None = None):
     except UnicodeDecodeError as error:
         raise fail(name, f"is not UTF-8 text ({error.reason} at byte {error.start})") from None
     try:
-        return json.loads(text, parse_constant=_refuse_constant)
+        document = json.loads(text, parse_constant=_refuse_constant)
     except ValueError as error:  # JSONDecodeError, and NaN/Infinity refused above
         raise fail(name, f"is not valid JSON ({error})") from None
+    values = _count_values(document, MAX_JSON_VALUES)
+    if values > MAX_JSON_VALUES:
+        # Validating that many values (each a possible error) would take gigabytes.
+        raise fail(name, f"holds more than {MAX_JSON_VALUES:,} values; the limit is "
+                         f"{MAX_JSON_VALUES:,}")
+    try:  # a lone surrogate ("\ud800") parses, but is no text: it cannot be written back
+        json.dumps(document, ensure_ascii=False).encode("utf-8")
+    except UnicodeEncodeError:
+        raise fail(name, "holds text that is not valid Unicode (a lone surrogate escape)") \
+            from None
+    return document
+
+
+def _count_values(document, limit: int) -> int:
+    """How many values (objects, arrays, scalars) ``document`` holds, counting up to
+    ``limit + 1``."""
+    count, stack = 0, [document]
+    while stack and count <= limit:
+        value = stack.pop()
+        count += 1
+        if isinstance(value, dict):
+            stack.extend(value.values())
+        elif isinstance(value, list):
+            stack.extend(value)
+    return count
 
 
 def check_size(path: str | os.PathLike, limit: int, kind: str) -> int:

@@ -11,6 +11,7 @@ zeros is refused in one line instead of exhausting memory.
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import re
@@ -29,6 +30,7 @@ from realpen.io.files import atomic_path, check_readable_file, riff_chunks, sha2
 from realpen.io.limits import (
     MAX_CHANNELS,
     MAX_FRAMES,
+    MAX_NPY_HEADER_BYTES,
     MAX_NPZ_ARRAY_BYTES,
     MAX_NPZ_DIRECTORY_BYTES,
     MAX_RATE_HZ,
@@ -324,7 +326,7 @@ _READ_BYTES = 1 << 22  # bytes inflated at a time from an NPZ member
 # What a damaged archive or member can raise from zipfile (RuntimeError: encrypted), zlib and
 # numpy's header reader.
 _NPZ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
-               RuntimeError)
+               RuntimeError, OverflowError)
 
 
 def _load_npz(path: Path, rate: float | None) -> Recording:
@@ -410,13 +412,23 @@ def _read_npz_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo,
                          f"arrays must be stored or deflated, as numpy writes them")
     with archive.open(info) as handle:
         version = np.lib.format.read_magic(handle)
-        if version == (1, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_1_0(handle)
-        elif version == (2, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_2_0(handle)
-        else:
+        if version not in ((1, 0), (2, 0)):
             raise fail(path, f"'{key}' is a .npy version {version[0]}.{version[1]} array; "
                              f"RealPen reads versions 1.0 and 2.0")
+        # numpy reads the whole declared header (up to 4 GiB) before checking its size: the
+        # length is read and bounded here, and numpy parses a copy of the bounded bytes.
+        width = 2 if version == (1, 0) else 4
+        length_bytes = _read_exactly(handle, width, path, key)
+        length = int.from_bytes(length_bytes, "little")
+        if length > MAX_NPY_HEADER_BYTES:
+            raise fail(path, f"'{key}' declares a {length:,}-byte .npy header; headers are "
+                             f"limited to {MAX_NPY_HEADER_BYTES:,} bytes")
+        header = io.BytesIO(length_bytes + _read_exactly(handle, length, path, key))
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
+            np.lib.format.read_array_header_2_0
+        shape, fortran, dtype = read_header(header)
+        if dtype.itemsize == 0:
+            raise fail(path, f"'{key}' holds {dtype} values, which take no bytes")
         if dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None:
             raise fail(path, f"'{key}' holds {dtype} values; NPZ arrays must hold numbers or "
                              f"text (objects, which need pickles, and records are refused)")

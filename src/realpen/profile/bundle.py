@@ -124,7 +124,8 @@ class PenProfile:
         base = self.meta.tactile
         try:
             params = TactileParams(**self.meta.provenance.tactile_parameters)
-        except (TypeError, ValueError):  # provenance of another version or shape: not needed
+        # Provenance of another version or shape, or numbers that overflow: not needed.
+        except (TypeError, ValueError, ArithmeticError):
             params = None
         pattern = replace(base, actuator=self.meta.actuator, params=params,
                           notes=tuple(self.meta.provenance.notes))
@@ -406,7 +407,8 @@ def _read_bundle_files(path: Path) -> dict[str, bytes]:
 
 
 def _first_error(error: ValidationError) -> str:
-    first = error.errors()[0]
+    # Without inputs and context: each error's copy of its input could take gigabytes.
+    first = error.errors(include_url=False, include_input=False, include_context=False)[0]
     # The location can hold the document's own keys (an unknown field): keep them short.
     where = ".".join(_one_line(part, 40) for part in first["loc"])
     message = _one_line(first["msg"].removeprefix("Value error, "))

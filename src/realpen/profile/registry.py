@@ -8,12 +8,15 @@ or a ``.zip`` file.
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
 from realpen.errors import RealPenError, fail
 from realpen.profile.bundle import PenProfile, load_profile
 from realpen.profile.schema import PROFILE_JSON
+
+log = logging.getLogger(__name__)
 
 __all__ = ["profile_locations", "list_profiles", "resolve_profile"]
 
@@ -38,8 +41,8 @@ def list_profiles(extra: list[Path] | None = None) -> list[tuple[str, Path]]:
     per bundle.
 
     Raises:
-        RealPenError: a folder of ``extra`` that is not a folder, or a folder of profiles that
-            cannot be listed (naming it).
+        RealPenError: a folder of ``extra`` that is not a folder or cannot be listed (naming
+            it). The user's folder, optional, is skipped with a logged warning instead.
     """
     found = []
     for where, folder in profile_locations(extra):
@@ -55,6 +58,10 @@ def list_profiles(extra: list[Path] | None = None) -> list[tuple[str, Path]]:
                         or entry.suffix == ".zip":
                     found.append((where, entry))
         except OSError as error:  # not permitted to list or to look inside
+            if where != "extra":  # the user's own folder is optional: the others still work
+                log.warning("%s: cannot list this profiles folder (%s); its profiles are "
+                            "skipped", folder, error.strerror or error)
+                continue
             raise fail(folder, f"cannot list this profiles folder ({error.strerror or error})") \
                 from None
     return found

@@ -30,8 +30,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from realpen.dsp.limits import MAX_SUBPATTERNS, MAX_TOP, MAX_UNIT_MS
+from realpen.dsp.limits import MAX_COMPONENTS, MAX_SUBPATTERNS, MAX_TOP, MAX_UNIT_MS
 from realpen.errors import ParameterError, require_choice, require_number
+from realpen.io.limits import MAX_RATE_HZ
 from realpen.tactile.actuator import Actuator
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.synthesis import (
@@ -135,6 +136,9 @@ class Component:
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         set_(self, "frequency_hz", _finite("frequency_hz", self.frequency_hz, 0.0, False))
+        if self.frequency_hz > MAX_RATE_HZ / 2:  # no pattern RealPen writes could hold it
+            raise ParameterError("frequency_hz", f"must be <= {MAX_RATE_HZ / 2:g} Hz (half the "
+                                                 f"highest rate), got {self.frequency_hz:g}")
         set_(self, "amplitude", _finite("amplitude", self.amplitude, 0.0))
         set_(self, "phase", _finite("phase", self.phase))
         for name in ("power", "weight"):
@@ -244,6 +248,10 @@ class TactilePattern:
                 raise ParameterError("subpatterns", f"sub-pattern {index} has {len(sub):,} "
                                                     f"components; the limit is {MAX_TOP}")
             subpatterns.append(tuple(Component.from_json(c) for c in sub))
+        total = sum(len(sub) for sub in subpatterns)
+        if total > MAX_COMPONENTS:
+            raise ParameterError("subpatterns", f"the pattern has {total:,} components in all; "
+                                                f"the limit is {MAX_COMPONENTS:,}")
         set_(self, "subpatterns", tuple(subpatterns))
         set_(self, "rate", check_rate(self.rate))
         set_(self, "subpattern_ms", _finite("subpattern_ms", self.subpattern_ms, 0.0, False))
