@@ -39,6 +39,8 @@ DEFAULT_FLAGS: dict[str, str] = {
     "axis": "--axis",
     "analysis_rate": "--analysis-rate",
     "input_rate": "--input-rate",
+    # studies (realpen.study)
+    "participants": "--participants",
     # tactile patterns (realpen.tactile)
     "condition": "--condition",
     "actuator": "--actuator",
