@@ -6,13 +6,23 @@ cd "$(dirname "$0")/.."
 python3 -m venv .venv
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e '.[test]'
-# The browser tests drive Debian's Chromium; install it when missing and we may.
+# The browser tests drive Debian's Chromium, and the store tests start a PostgreSQL server of
+# their own (initdb in a temporary folder): install what is missing when we may, with one
+# apt-get update for both.
+missing=()
 if [ ! -x /usr/bin/chromium ]; then
+    missing+=(chromium)
+fi
+if ! command -v initdb >/dev/null 2>&1 && ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
+    missing+=(postgresql)
+fi
+if [ "${#missing[@]}" -gt 0 ]; then
     if [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null 2>&1; then
-        apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y chromium
+        apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y "${missing[@]}"
     else
-        echo "note: /usr/bin/chromium is missing and installing it needs root and apt-get;" \
-             "the browser tests will be skipped (install the Debian package 'chromium')." >&2
+        echo "note: missing Debian package(s) ${missing[*]}, and installing them needs root and" \
+             "apt-get; the tests that need them will be skipped (chromium: the browser tests;" \
+             "postgresql: the store tests on PostgreSQL)." >&2
     fi
 fi
 # Lint first: the rules are in pyproject.toml ([tool.ruff]); any finding stops the run.

@@ -17,7 +17,8 @@ import threading
 import time
 
 import pytest
-from conftest import run_cli
+import sqlalchemy.exc
+from conftest import run_cli, store_rows
 from live_support import LOCAL, WS, rows, talk
 
 pytest.importorskip("fastapi", reason="the live app needs the server dependencies")
@@ -102,8 +103,8 @@ def test_samples_and_pen_up_resent_for_a_stroke_the_server_ended_are_taken(clien
         assert reply["code"] == "protocol"
 
 
-def test_store_numbers_samples_and_ignores_a_number_it_has(tmp_path):
-    store = StrokeStore(tmp_path / "s.sqlite3")
+def test_store_numbers_samples_and_ignores_a_number_it_has(store_target):
+    store = StrokeStore(store_target)
     sid = store.begin_stroke(session="s", page_stroke=1, page_t0=1.0, **STROKE_FIELDS)
     assert store.begin_stroke(session="other", page="s", page_stroke=1, page_t0=9.0,
                               **STROKE_FIELDS) == sid  # same page, same stroke
@@ -112,7 +113,7 @@ def test_store_numbers_samples_and_ignores_a_number_it_has(tmp_path):
     assert store.add_samples(sid, rows_[1:5], first=1) == 5  # 1 and 2 again: ignored
     assert store.add_samples(sid, rows_[:1]) == 6  # unnumbered: after the last
     store.close()
-    assert rows(tmp_path / "s.sqlite3", "SELECT seq, x FROM samples ORDER BY seq") == \
+    assert store_rows(store_target, "SELECT seq, x FROM samples ORDER BY seq") == \
         [(0, 0.0), (1, 1.0), (2, 2.0), (3, 3.0), (4, 4.0), (5, 0.0)]
 
 
@@ -191,29 +192,28 @@ def test_writes_that_cannot_begin_fail_and_later_ones_succeed(tmp_path, monkeypa
         futures = [store.begin(session="s", page_stroke=k, page_t0=0.0, **STROKE_FIELDS)
                    for k in (1, 2)]
         for future in futures:  # every future of the batch resolves, none hangs
-            with pytest.raises(sqlite3.OperationalError, match="locked"):
+            with pytest.raises(sqlalchemy.exc.OperationalError, match="locked"):
                 future.result(timeout=10)
     finally:
         other.execute("ROLLBACK")
         other.close()
     assert store.begin_stroke(session="s", page_stroke=3, page_t0=0.0, **STROKE_FIELDS) > 0
     store.close()
-    with pytest.raises(sqlite3.ProgrammingError, match="closed"):
+    with pytest.raises(sqlalchemy.exc.ResourceClosedError, match="closed"):
         store.begin(session="s", page_stroke=4, page_t0=0.0, **STROKE_FIELDS).result(timeout=5)
 
 
-def test_a_write_whose_caller_stopped_waiting_is_still_made(tmp_path):
-    path = tmp_path / "s.sqlite3"
-    store = StrokeStore(path)
+def test_a_write_whose_caller_stopped_waiting_is_still_made(store_target):
+    store = StrokeStore(store_target)
     sid = store.begin_stroke(session="s", page_stroke=1, page_t0=0.0, **STROKE_FIELDS)
     gate = threading.Event()
-    held = store._submit(lambda db: gate.wait(10))  # the writer is busy with this
+    held = store.submit(lambda db: gate.wait(10))  # the writer is busy with this
     ended = store.end(sid, "disconnect")
     assert ended.cancel()  # the connection's task was cancelled while the end was queued
     gate.set()
     held.result(timeout=10)
     store.close()
-    assert rows(path, "SELECT end_reason FROM strokes") == [("disconnect",)]
+    assert store_rows(store_target, "SELECT end_reason FROM strokes") == [("disconnect",)]
 
 
 
@@ -314,7 +314,7 @@ def test_a_version_1_store_is_upgraded_in_place(tmp_path):
     # Version 1 took a stroke number twice on one connection: the later stroke stays its own.
     assert rows(path, "SELECT page, end_reason FROM strokes") == [("abc", "pen_up"),
                                                                    ("abc#2", "pen_up")]
-    assert rows(path, "PRAGMA user_version") == [(2,)]
+    assert rows(path, "PRAGMA user_version") == [(3,)]  # 3: migrated by Alembic
 
 
 # ---- the web side ----------------------------------------------------------------------------

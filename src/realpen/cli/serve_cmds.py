@@ -14,6 +14,8 @@ from realpen.errors import RealPenError, require_choice
 from realpen.io.paths import default_store
 
 TACTILE_CHOICES = ("audio", "none")
+STORE_HELP = ("The store: an SQLite file (default: strokes.sqlite3 in the data folder) or a "
+              "PostgreSQL URL, postgresql://USER:PASSWORD@HOST/DATABASE.")
 
 strokes_app = sub_app("strokes", "The strokes the live app stored.")
 
@@ -38,8 +40,7 @@ def serve(
     port: int = typer.Option(8765, "--port", help="Port to listen on (0: any free port)."),
     profiles: list[Path] = typer.Option(
         [], "--profiles", help="A folder of extra pen profiles (repeatable)."),
-    store: Path | None = typer.Option(
-        None, "--store", help="SQLite stroke store (default: strokes.sqlite3 in the data folder)."),
+    store: str | None = typer.Option(None, "--store", metavar="FILE|URL", help=STORE_HELP),
     tactile: str = typer.Option(
         "none", "--tactile",
         help="audio: the tactile pattern plays on the right audio channel (sound on the left), "
@@ -47,8 +48,11 @@ def serve(
     lan: bool = typer.Option(
         False, "--lan", help="Listen on all interfaces for a tablet on the same network; every "
                              "request then needs the random token in the printed URL."),
+    designs: list[Path] = typer.Option(
+        [], "--design", help="A study design file (YAML or JSON) to offer beside study1 and "
+                             "study2 (repeatable)."),
 ) -> None:
-    """Start the live app: open the printed URL, pick a pen, and write."""
+    """Start the live app: open the printed URL, pick a pen, and write (studies: /study)."""
     from realpen.live.app import LiveSettings, create_app
     from realpen.live.auth import LOOPBACK_HOSTS, new_token
     from realpen.live.server import bind, lan_address, run, url_host
@@ -58,10 +62,10 @@ def serve(
     if not lan and not _is_loopback(host):
         raise RealPenError(f"--host {host}: other machines could reach it; add --lan (every "
                            f"request then needs a random token)")
-    store = store or default_store()
+    store = default_store() if store is None else store
     token = new_token() if lan else None
     settings = LiveSettings(store=store, profiles=list(profiles), tactile=tactile, token=token,
-                            allowed_hosts=None if lan else LOOPBACK_HOSTS)
+                            allowed_hosts=None if lan else LOOPBACK_HOSTS, designs=list(designs))
     # The port first: a port in use is refused before the profiles load and the store opens.
     sock = bind(host, port)
     try:
@@ -80,9 +84,11 @@ def serve(
         if lan:
             summary.append(f"  (open it on the tablet; on this machine: "
                            f"http://127.0.0.1:{port}/{query})")
+        summary.append(f"  studies: http://{url_host(shown)}:{port}/study{query} "
+                       f"({', '.join(state.designs)})")
         summary.append(f"  pens: {', '.join(state.catalog.names)} | tactile: "
                        f"{'audio, right channel' if tactile == 'audio' else 'none (pen device)'}"
-                       f" | store: {store}")
+                       f" | store: {state.store.display}")
         # Profiles that did not load are said here, once, on stdout (not logged to stderr).
         summary += [f"  skipped profile: {problem}" for problem in state.catalog.skipped]
         summary.append("  Ctrl-C stops the server.")
@@ -96,14 +102,14 @@ def serve(
         if state.final_counts is None:  # the app never shut down (it never started serving)
             state.store.discard()
     strokes, samples = state.final_counts or (0, 0)
-    print(f"stopped: the store holds {strokes} strokes, {samples} samples ({store})", flush=True)
+    print(f"stopped: the store holds {strokes} strokes, {samples} samples "
+          f"({state.store.display})", flush=True)
 
 
 @strokes_app.command("export")
 def export(
     output: Path = typer.Option(..., "-o", "--output", help="CSV to write, one row per sample."),
-    store: Path | None = typer.Option(
-        None, "--store", help="SQLite stroke store (default: strokes.sqlite3 in the data folder)."),
+    store: str | None = typer.Option(None, "--store", metavar="FILE|URL", help=STORE_HELP),
     stroke: int | None = typer.Option(
         None, "--stroke", help="Only this stroke (its id in the store): a trajectory for "
                                "`realpen sound render`."),
@@ -111,12 +117,14 @@ def export(
 ) -> None:
     """Write the stored strokes as CSV: stroke, pen, modality, …, t, x, y, pressure, tilt, speed."""
     from realpen.live.store import export_csv
+    from realpen.study.db import hide_password, store_file
 
-    store = store or default_store()
-    # The store's journal files are part of it: writing over one would lose what it holds.
-    check_outputs(output, force=force, inputs={
-        "stroke store": store, **{f"stroke store's {suffix} file": Path(f"{store}{suffix}")
-                                  for suffix in ("-wal", "-shm", "-journal")}})
+    store = default_store() if store is None else store
+    file = store_file(store)
+    # An SQLite store's journal files are part of it: writing over one would lose what it holds.
+    check_outputs(output, force=force, inputs={} if file is None else {
+        "stroke store": file, **{f"stroke store's {suffix} file": Path(f"{file}{suffix}")
+                                 for suffix in ("-wal", "-shm", "-journal")}})
     strokes, rows = export_csv(store, output, stroke)
-    console.print(f"wrote {output}: {rows} samples of {strokes} strokes from {store}",
-                  highlight=False)
+    console.print(f"wrote {output}: {rows} samples of {strokes} strokes from "
+                  f"{hide_password(store)}", highlight=False)

@@ -28,12 +28,14 @@ Studies:
 ``answers``       one row per question of an answered trial: the answer as text, whether it
                   was right (recognition questions; else NULL).
 
-Times are ISO 8601 text in UTC with milliseconds, the same on both databases.
+Times are ISO 8601 text in UTC with milliseconds, the same on both databases. Ids and counts are
+32-bit integers (PostgreSQL's INTEGER): :data:`MAX_ID` is the largest an API accepts.
 """
 
 from __future__ import annotations
 
 from sqlalchemy import (
+    BigInteger,
     Boolean,
     Column,
     Float,
@@ -51,9 +53,10 @@ from sqlalchemy import (
 
 from realpen.io.strokes import SAMPLE_FIELDS
 
-__all__ = ["metadata", "strokes", "samples", "studies", "participants", "sessions", "trials",
+__all__ = ["MAX_ID", "metadata", "strokes", "samples", "studies", "participants", "sessions", "trials",
            "answers", "END_REASONS", "SESSION_STATES", "PHASES"]
 
+MAX_ID = 2**31 - 1
 END_REASONS = ("pen_up", "disconnect", "replaced", "shutdown", "crash")
 SESSION_STATES = ("running", "paused", "finished")
 PHASES = ("training", "experimental", "questionnaire")
@@ -98,7 +101,7 @@ sessions = Table(
     Column("participant_id", Integer, ForeignKey("participants.id", ondelete="CASCADE"),
            nullable=False),
     Column("plan_index", Integer, nullable=False),
-    Column("seed", Integer, nullable=False),
+    Column("seed", BigInteger, nullable=False),  # plan seeds go up to 2^63 - 1
     Column("site", Text, nullable=False, server_default=""),
     Column("state", Text, nullable=False, server_default="running"),
     Column("started_at", Text, nullable=False),
