@@ -6,7 +6,10 @@ events. The pieces:
 
 - :mod:`~realpen.live.messages` — the pydantic schema of every WebSocket message;
 - :mod:`~realpen.live.session` — what one page's messages do (store, device, replies);
-- :mod:`~realpen.live.store` — the SQLite stroke store and its CSV export;
+- :mod:`~realpen.live.store` — the stroke store (SQLite or PostgreSQL, on the tables of
+  :mod:`realpen.study.tables`) and its CSV export;
+- :mod:`~realpen.live.study_routes` — the study pages and HTTP API (:mod:`realpen.study`);
+- :mod:`~realpen.live.bodies` — request bodies: small, and sent in time;
 - :mod:`~realpen.live.device` — the seam for the pen's own hardware and the simulated device;
 - :mod:`~realpen.live.catalog` — the profiles the server offers;
 - :mod:`~realpen.live.auth` — the LAN token, Host and Origin checks.

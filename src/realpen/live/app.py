@@ -12,6 +12,7 @@ and :class:`~realpen.live.auth.SecurityHeaders`, which adds the security headers
 ``GET /api/device/log?since=N&limit=M``      the simulated device's command log, a page of at
                                              most :data:`DEVICE_LOG_PAGE` entries at a time
 ``GET /api/status``                          pages connected, strokes and samples stored
+``/study``, ``/api/studies``, ``/api/sessions…``  the studies (:mod:`realpen.live.study_routes`)
 ``WS  /ws``                                  pen events (:mod:`realpen.live.messages`)
 """
 
@@ -23,18 +24,21 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Literal
 
-from fastapi import FastAPI, HTTPException, Query, WebSocket, WebSocketDisconnect
-from fastapi.responses import HTMLResponse, Response
+from fastapi import FastAPI, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
 from realpen import __version__
 from realpen.io.paths import default_store
 from realpen.live.auth import LOOPBACK_HOSTS, AccessGuard, SecurityHeaders
+from realpen.live.bodies import BodyLimit
 from realpen.live.catalog import Catalog
 from realpen.live.device import PenDevice, SimulatedDevice
 from realpen.live.messages import MAX_MESSAGE_BYTES, MAX_SAMPLES, MODALITIES, PROTOCOL
 from realpen.live.session import Session
 from realpen.live.store import StrokeStore
+from realpen.live.study_routes import add_study_routes, load_designs, validation_line
 
 STATIC_DIR = Path(str(files(__package__) / "static"))
 NO_CACHE = {"Cache-Control": "no-cache"}
@@ -46,7 +50,8 @@ class LiveSettings:
     """How a live app is set up.
 
     Attributes:
-        store: the SQLite stroke store (None: :func:`realpen.paths.default_store`).
+        store: the store: an SQLite file, or a database URL (``postgresql://…``; None:
+            :func:`realpen.paths.default_store`).
         profiles: extra folders of profiles, after the bundled and user ones.
         tactile: ``"audio"`` plays the tactile pattern on the right audio channel by default
             (the page can toggle it); ``"none"`` leaves touch to the pen's own device.
@@ -55,15 +60,17 @@ class LiveSettings:
             serving passes :data:`~realpen.live.auth.LOOPBACK_HOSTS`.
         device: what pen commands drive (None: a new :class:`SimulatedDevice`).
         max_message_bytes: the size limit of one WebSocket message.
+        designs: study design files offered beside the built-in ``study1`` and ``study2``.
     """
 
-    store: Path | None = None
+    store: Path | str | None = None
     profiles: list[Path] = field(default_factory=list)
     tactile: Literal["audio", "none"] = "none"
     token: str | None = None
     allowed_hosts: tuple[str, ...] | None = None
     device: PenDevice | None = None
     max_message_bytes: int = MAX_MESSAGE_BYTES
+    designs: list[Path] = field(default_factory=list)
 
     @classmethod
     def loopback(cls, **kwargs) -> LiveSettings:
@@ -91,6 +98,7 @@ class LiveState:
     sessions: dict[str, Session] = field(default_factory=dict)
     pages: dict[str, Session] = field(default_factory=dict)  # page id → its live session
     final_counts: tuple[int, int] | None = None  # (strokes, samples) when the store closed
+    designs: dict = field(default_factory=dict)  # the study designs offered, by name
 
     def open_session(self) -> Session:
         session = Session(self.catalog, self.store, self.device, self.settings.max_message_bytes,
@@ -123,6 +131,7 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
     """
     settings = settings or LiveSettings()
     catalog = Catalog(settings.profiles)
+    designs = load_designs(settings.designs)
     store = StrokeStore(settings.store or default_store())
     state = LiveState(settings, catalog, store, settings.device or SimulatedDevice())
 
@@ -136,9 +145,17 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
     app = FastAPI(title="RealPen live", version=__version__, lifespan=lifespan,
                   docs_url=None, redoc_url=None, openapi_url=None)
     app.state.live = state
+    app.add_middleware(BodyLimit)  # innermost: a refused request's body is never read
     app.add_middleware(AccessGuard, token=settings.token, allowed_hosts=settings.allowed_hosts)
     app.add_middleware(SecurityHeaders)  # outermost: refusals carry the headers too
     app.mount("/static", NoCacheStatic(directory=STATIC_DIR), name="static")
+
+    @app.exception_handler(RequestValidationError)
+    async def one_line_422(request: Request, error: RequestValidationError) -> JSONResponse:
+        return JSONResponse({"detail": validation_line(error)}, status_code=422)
+
+    state.designs = designs
+    add_study_routes(app, state, designs, STATIC_DIR)
 
     @app.get("/", response_class=HTMLResponse)
     def page() -> HTMLResponse:
@@ -180,7 +197,7 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
     def status() -> dict:
         strokes, samples = store.count()
         return {"pages": len(state.sessions), "strokes": strokes, "samples": samples,
-                "store": str(store.path)}
+                "store": store.display}
 
     @app.websocket("/ws")
     async def pen_events(websocket: WebSocket) -> None:

@@ -43,6 +43,7 @@ SECURITY_HEADERS = (
     (b"cross-origin-opener-policy", b"same-origin"),
     (b"cross-origin-resource-policy", b"same-origin"),
 )
+PAGES = ("/", "/study", "/study/participant")  # what a link from elsewhere may open
 ALLOWED_FETCH_SITES = ("same-origin", "none")  # "none": typed, bookmarked, opened by the user
 
 
@@ -133,13 +134,13 @@ def content_security_policy(host: str | None = None) -> str:
 
 def _cross_site(scope, headers: Headers) -> bool:
     """A browser request made by another site's page (Fetch Metadata), other than following a
-    link to the writing page."""
+    link to one of the pages (the writing page, the study console, the participant screen)."""
     site = headers.get("sec-fetch-site")
     if site is None or site in ALLOWED_FETCH_SITES:
         return False
     navigation = headers.get("sec-fetch-mode") == "navigate" and \
         headers.get("sec-fetch-dest") == "document"
-    return not (navigation and scope.get("method") == "GET" and scope.get("path") == "/")
+    return not (navigation and scope.get("method") == "GET" and scope.get("path") in PAGES)
 
 
 class SecurityHeaders:

@@ -7,6 +7,8 @@ The page sends JSON text frames, one message each, told apart by ``type``:
               what it resends after a reconnect is recognised and stored once;
 ``pen_down``  a stroke starts: the pen (profile name and content version), the modality, the
               ink (visible or hidden), the pointer type and the page's calibration (px/mm);
+              in a study, the study session and trial number it belongs to (``study_session``,
+              ``trial``; optional, both or neither);
 ``samples``   a batch of the stroke's samples (the coalesced pointer events of one event),
               with ``index``, the number of its first sample within the stroke (optional; a
               sample number already stored is not stored again);
@@ -102,6 +104,9 @@ class PenDown(_Message):
     pointer_type: PointerType = "pen"
     px_per_mm: float = Field(gt=0, le=1000)
     calibrated: bool = False
+    # ids are 32-bit in the store (PostgreSQL INTEGER)
+    study_session: Annotated[int, Field(ge=1, le=2**31 - 1)] | None = None
+    trial: Annotated[int, Field(ge=1, le=2**31 - 1)] | None = None
 
 
 class Samples(_Message):

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import sqlite3
 import time
 import uuid
 from dataclasses import dataclass
@@ -39,7 +38,7 @@ from realpen.live.messages import (
     Samples,
     parse_message,
 )
-from realpen.live.store import StrokeStore
+from realpen.live.store import STORE_ERRORS, StrokeStore, error_line
 
 __all__ = ["Session", "OpenStroke", "TACTILE_MODALITIES"]
 
@@ -73,6 +72,7 @@ class Session:
         self.max_message_bytes = max_message_bytes
         self.stroke: OpenStroke | None = None
         self.received = self.refused = 0
+        self.known_trials: set[tuple[int, int]] = set()
 
     async def handle(self, raw: str | bytes) -> Ack | Error:
         """Handle one frame and return the reply to send (after the store committed it)."""
@@ -88,17 +88,28 @@ class Session:
             if error.seq is None and message is not None:
                 error.seq = message.seq
             return error.reply()
-        except sqlite3.Error as error:
+        except STORE_ERRORS as error:
             self.refused += 1
-            log.error("stroke store: %s", error)
+            log.error("stroke store: %s", error_line(error))
             return Error(seq=getattr(message, "seq", None), code="store",
-                         message=f"the stroke store could not record it ({error}); send it "
-                                 f"again")
+                         message=f"the stroke store could not record it ({error_line(error)}); "
+                                 f"send it again")
         except Exception:  # a bug must not take the connection or the server down
             self.refused += 1
             log.exception("session %s: unexpected error", self.id)
             return Error(seq=getattr(message, "seq", None), code="internal",
                          message="internal error (logged on the server)")
+
+    async def _check_trial(self, study_session: int, trial: int) -> None:
+        """Refuse a stroke for a study trial that does not exist (checked once per trial)."""
+        if (study_session, trial) in self.known_trials:
+            return
+        from realpen.study.sessions import trial_exists
+
+        if not await asyncio.wrap_future(self.store.read(trial_exists, study_session, trial)):
+            raise MessageError("invalid_message", f"pen_down: study session {study_session} has "
+                                                  f"no trial {trial}")
+        self.known_trials.add((study_session, trial))
 
     async def _dispatch(self, message) -> dict:
         if isinstance(message, Samples):
@@ -148,6 +159,11 @@ class Session:
             raise MessageError("unknown_pen", f"pen_down.profile_version: the page has "
                                f"'{message.pen}' version {message.profile_version}, the server "
                                f"{profile.version}; reload the page")
+        if (message.study_session is None) != (message.trial is None):
+            raise MessageError("invalid_message", "pen_down: give both study_session and trial, "
+                                                  "or neither")
+        if message.study_session is not None:
+            await self._check_trial(message.study_session, message.trial)
         if self.stroke is not None:
             await self._end("replaced", message.seq)
         tactile = message.modality in TACTILE_MODALITIES
@@ -157,7 +173,8 @@ class Session:
             session=self.id, page=self.page, page_stroke=message.stroke, pen=profile.name,
             profile_version=profile.version, modality=message.modality, ink=message.ink,
             pointer_type=message.pointer_type, px_per_mm=message.px_per_mm,
-            calibrated=message.calibrated, page_t0=message.t)
+            calibrated=message.calibrated, page_t0=message.t,
+            study_session=message.study_session, trial=message.trial)
         try:
             stroke_id = await asyncio.wrap_future(begun)
         except BaseException:  # not recorded: the pen is lifted, the page will send it again

@@ -1,8 +1,9 @@
 // The RealPen page: pick a pen, a feedback modality and the ink, then write.
 //
-// Each pen sample goes three ways: the ink (ink.js), the audio graph (Eq. 1 gain of the sound
-// unit and the tactile loop, audio.js) and the server (pen_down / samples / gain / pen_up over
-// the WebSocket, link.js), which stores the stroke and drives the pen's actuator.
+// Each pen sample goes three ways (writer.js, which the study's participant screen shares): the
+// ink (ink.js), the audio graph (Eq. 1 gain of the sound unit and the tactile loop, audio.js)
+// and the server (pen_down / samples / gain / pen_up over the WebSocket, link.js), which stores
+// the stroke and drives the pen's actuator.
 //
 // window.realpen exposes the live state for tests and for the curious: pen, modality, ink,
 // calibration, the latest pressure and speed, the Eq. 1 target gain, the smoothed gain (the
@@ -16,15 +17,14 @@
 // notice says what failed.
 
 import { alpha, gainRaw, onePole, playbackRate, Smoother } from './coupling.js';
-import { CSS_PX_PER_MM, MOUSE_PRESSURE, PenTracker, SPEED_WINDOW_MS } from './pen.js';
-import { AudioEngine } from './audio.js';
+import { CSS_PX_PER_MM, MOUSE_PRESSURE, SPEED_WINDOW_MS } from './pen.js';
+import { AudioEngine, startOnActivation } from './audio.js';
 import { Ink, inkStyle } from './ink.js';
 import { Link } from './link.js';
+import { Writer } from './writer.js';
 
 const MODALITIES = ['tactile', 'auditory', 'auditory-tactile', 'none'];
 const INKS = ['visible', 'hidden'];
-const POINTER_TYPES = ['pen', 'touch', 'mouse'];
-const TRACE_LIMIT = 20000;
 
 const query = new URLSearchParams(window.location.search);
 const token = query.get('token');
@@ -97,8 +97,6 @@ const audio = new AudioEngine();
 const smoother = new Smoother(audio.sampleRate, 5);
 const ink = new Ink($('ink'));
 const buffers = new Map();
-let lastSentTarget = null;
-let sampleIndex = 0; // samples of the current stroke sent so far
 let penRequest = 0;
 
 Object.defineProperties(state, {
@@ -115,123 +113,11 @@ const link = new Link(
 // After a reload in this tab the page is the same page: its stroke numbers go on from its last.
 state.stroke = link.lastStroke;
 
-const soundOn = () => state.modality === 'auditory' || state.modality === 'auditory-tactile';
-const tactileOn = () => state.modality === 'tactile' || state.modality === 'auditory-tactile';
-const profile = () => state.profiles.find((p) => p.name === state.pen);
+const writer = new Writer(state, { surface: $('surface'), ink, audio, smoother, link,
+  onChange: scheduleStatus, onDown: () => $('hint').classList.add('gone') });
 
-// ---- pen samples → ink, audio, server -------------------------------------------------------
-
-function apply(samples) {
-  const c = state.coupling;
-  let target = 0;
-  for (const s of samples) {
-    target = gainRaw(c, s.pressure, s.speed);
-    const smoothed = smoother.advanceTo(s.t);
-    smoother.set(target);
-    record(s.t, s.pressure, s.speed, target, smoothed);
-  }
-  const last = samples[samples.length - 1];
-  Object.assign(state, { pressure: last.pressure, speed: last.speed, tiltX: last.tilt_x,
-    tiltY: last.tilt_y, targetGain: target, playbackRate: playbackRate(c, last.speed) });
-  state.tactileTarget = tactileOn() && state.tactileAudio ? target / c.a_max : 0;
-  audio.set(soundOn() ? target : 0, state.tactileTarget, state.playbackRate);
-  if (target !== lastSentTarget) {
-    link.send({ type: 'gain', stroke: state.stroke, t: last.t, target });
-    lastSentTarget = target;
-  }
-  // Batches stay under the server's message size too: a sample's JSON is at most ~200 bytes.
-  const config = state.config || {};
-  const limit = Math.min(config.max_samples || 512,
-    Math.floor((config.max_message_bytes || 65536) / 200));
-  for (let i = 0; i < samples.length; i += limit) {
-    const batch = samples.slice(i, i + limit);
-    // `index` numbers the samples within the stroke: a batch sent again is stored once.
-    link.send({ type: 'samples', stroke: state.stroke, index: sampleIndex,
-      samples: batch.map(({ t, x, y, pressure, tilt_x, tilt_y, speed }) => (
-        { t, x, y, pressure, tilt_x, tilt_y, speed })) });
-    sampleIndex += batch.length;
-  }
-  scheduleStatus();
-}
-
-function record(t, pressure, speed, target, smoothed) {
-  state.smoothedGain = smoothed;
-  state.trace.push({ stroke: state.stroke, t, k: smoother.index, rate: smoother.rate, pressure,
-    speed, target, smoothed });
-  if (state.trace.length > TRACE_LIMIT) state.trace.splice(0, state.trace.length - TRACE_LIMIT);
-}
-
-function penDown(info, sample) {
-  if (!state.coupling) return;
-  $('hint').classList.add('gone');
-  state.stroke += 1;
-  state.strokes += 1;
-  state.down = true;
-  state.pointerType = info.pointerType;
-  lastSentTarget = null;
-  sampleIndex = 0;
-  link.send({ type: 'pen_down', stroke: state.stroke, t: sample.t, pen: state.pen,
-    profile_version: state.profileVersion, modality: state.modality, ink: state.ink,
-    pointer_type: pick(info.pointerType, POINTER_TYPES, 'unknown'), px_per_mm: state.pxPerMm,
-    calibrated: state.calibrated });
-  ink.begin(inkStyle(profile()), state.pxPerMm, sample, state.ink === 'visible');
-  apply([sample]);
-}
-
-function penSamples(samples) {
-  if (!state.down) return;
-  ink.add(samples);
-  apply(samples);
-}
-
-function penUp(t) {
-  if (!state.down) return;
-  state.down = false;
-  const smoothed = smoother.advanceTo(t);
-  smoother.set(0);
-  record(t, 0, 0, 0, smoothed);
-  Object.assign(state, { pressure: 0, speed: 0, targetGain: 0, tactileTarget: 0 });
-  audio.set(0, 0, state.playbackRate);
-  link.send({ type: 'pen_up', stroke: state.stroke, t });
-  ink.end();
-  scheduleStatus();
-}
-
-const tracker = new PenTracker($('surface'), {
-  pxPerMm: state.pxPerMm, onDown: penDown, onSamples: penSamples, onUp: penUp });
-
-// ---- starting audio -------------------------------------------------------------------------
-// Browsers start an AudioContext only while the page has user activation, and which events give
-// it depends on the pointer: under the HTML rules a mouse's pointerdown (or mousedown) does, but
-// a pen's or a finger's pointerdown does not — their pointerup and touchend do (and the click
-// that follows is still inside the activation). Chrome on a desktop is lenient; Safari on an
-// iPad is not. So every one of these events, anywhere on the page and in the capture phase (no
-// handler can hide it), asks for a resume until the context runs: a pen's first pointerdown
-// is refused quietly and its pointerup starts the audio. If the browser suspends the context
-// later (iOS after a call, a page in the background), the listeners are armed again.
-
-const ACTIVATION_EVENTS = ['pointerdown', 'mousedown', 'pointerup', 'touchend', 'click', 'keydown'];
-const LISTEN = { capture: true, passive: true };
-let audioArmed = false;
-
-function startAudio() {
-  audio.resume();
-}
-
-function armAudioStart(on) {
-  if (on === audioArmed) return;
-  audioArmed = on;
-  for (const type of ACTIVATION_EVENTS) {
-    if (on) window.addEventListener(type, startAudio, LISTEN);
-    else window.removeEventListener(type, startAudio, LISTEN);
-  }
-}
-
-audio.onStateChange((audioState) => {
-  armAudioStart(audioState !== 'running' && audioState !== 'closed');
-  scheduleStatus();
-});
-armAudioStart(audio.state !== 'running');
+// Audio starts at the first event that may give user activation (see audio.js).
+startOnActivation(audio, scheduleStatus);
 
 // ---- pickers ------------------------------------------------------------------------------
 
@@ -370,7 +256,7 @@ function buildPenPicker() {
 function setCalibration(pxPerMm, calibrated) {
   state.pxPerMm = pxPerMm;
   state.calibrated = calibrated;
-  tracker.pxPerMm = pxPerMm;
+  writer.setPxPerMm(pxPerMm);
   document.documentElement.style.setProperty('--px-per-mm', String(pxPerMm));
   scheduleStatus();
 }

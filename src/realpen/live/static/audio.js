@@ -7,8 +7,8 @@
 // With tactile over audio on, the right channel drives an actuator through an amplifier (the
 // common research set-up) and the left channel carries the sound. The context is created with
 // the interactive latency hint; browsers keep it suspended until the page has user activation,
-// so app.js calls `resume` from every event that may carry it until the context runs (see
-// "starting audio" there). Both loops run from then on; the gains (smoothed by
+// so `startOnActivation` calls `resume` from every event that may carry it until the context
+// runs (see "starting audio" below). Both loops run from then on; the gains (smoothed by
 // setTargetAtTime with the profile's time constant, which is the smoother of coupling.js)
 // make them silent whenever the pen is lifted.
 //
@@ -128,4 +128,37 @@ export class AudioEngine {
         ([part, b]) => [part, { sampleRate: b.sampleRate, length: b.length, duration: b.duration }])),
     };
   }
+}
+
+// ---- starting audio -------------------------------------------------------------------------
+// Browsers start an AudioContext only while the page has user activation, and which events give
+// it depends on the pointer: under the HTML rules a mouse's pointerdown (or mousedown) does, but
+// a pen's or a finger's pointerdown does not — their pointerup and touchend do (and the click
+// that follows is still inside the activation). Chrome on a desktop is lenient; Safari on an
+// iPad is not. So every one of these events, anywhere on the page and in the capture phase (no
+// handler can hide it), asks for a resume until the context runs: a pen's first pointerdown
+// is refused quietly and its pointerup starts the audio. If the browser suspends the context
+// later (iOS after a call, a page in the background), the listeners are armed again.
+
+const ACTIVATION_EVENTS = ['pointerdown', 'mousedown', 'pointerup', 'touchend', 'click', 'keydown'];
+const LISTEN = { capture: true, passive: true };
+
+/** Start `audio` (an AudioEngine) at the first event that may give user activation, and again
+ *  whenever the browser suspends it; `onChange(state)` hears every change of its state. */
+export function startOnActivation(audio, onChange = () => {}) {
+  let armed = false;
+  const start = () => audio.resume();
+  const arm = (on) => {
+    if (on === armed) return;
+    armed = on;
+    for (const type of ACTIVATION_EVENTS) {
+      if (on) window.addEventListener(type, start, LISTEN);
+      else window.removeEventListener(type, start, LISTEN);
+    }
+  };
+  audio.onStateChange((audioState) => {
+    arm(audioState !== 'running' && audioState !== 'closed');
+    onChange(audioState);
+  });
+  arm(audio.state !== 'running');
 }

@@ -1,0 +1,500 @@
+"""Running a study session: create or resume, the next trial, answers, progress, state.
+
+Every function here that takes ``conn`` is a store operation: it runs inside one transaction of
+the store's writer (:meth:`realpen.live.store.StrokeStore.submit`), and its result reaches the
+caller only once that transaction is committed. That is what makes an answer durable before it
+is acknowledged, and what makes a second answer to a trial impossible: the check that the trial
+is unanswered and the write happen in one transaction, on one writer, and the primary key of
+``answers`` (session, trial, question) refuses a second row even from another server sharing a
+PostgreSQL database.
+
+A session is one participant's run of one design. Its planned trials are written when it is
+created (from :func:`realpen.study.plan.participant_plan`), so the plan a participant follows
+never changes, even if the design file does later: the design itself is stored with the session's
+study (``studies.design``), and resuming reads that copy.
+
+Problems a caller can fix are :class:`StudyError` with an HTTP-like ``status``: 404 (no such
+session or trial), 409 (answered already, not the next trial, finished) and 422 (an invalid
+answer or request), each with a one-line ``detail``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import Connection, and_, case, func, insert, select, text, update
+
+from realpen.study.design import Design
+from realpen.study.plan import PlannedTrial, participant_plan
+from realpen.study.tables import SESSION_STATES, answers, participants, sessions, studies, trials
+
+__all__ = ["StudyError", "storable", "SessionRequest", "DesignCache", "LIVE_MODALITY", "MAX_RT_MS",
+           "MAX_CODE_CHARS", "open_session", "next_trial", "answer_trial", "progress",
+           "list_sessions", "set_state", "trial_plan", "trial_exists", "pen_profile", "design_summary", "now"]
+
+# The study modality names are the statistics' (``audio-tactile``); the live page's WebSocket
+# protocol calls the same output ``auditory-tactile``.
+LIVE_MODALITY = {"tactile": "tactile", "auditory": "auditory", "audio-tactile": "auditory-tactile",
+                 "none": "none"}
+MAX_RT_MS = 24 * 3600 * 1000.0  # a response time beyond a day is a clock error, not an answer
+MAX_CODE_CHARS = 64
+MAX_SITE_CHARS = 200
+
+
+def storable(text: str) -> bool:
+    """Whether both databases can store ``text``: no NUL (PostgreSQL refuses it) and valid
+    Unicode (an unpaired surrogate cannot be encoded as UTF-8)."""
+    if "\x00" in text:
+        return False
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+class StudyError(Exception):
+    """A request the study cannot take: ``status`` 404, 409 or 422, a one-line ``detail``, and
+    ``extra`` fields for the reply (the stored answer of a 409, the next trial)."""
+
+    def __init__(self, status: int, detail: str, **extra: Any):
+        super().__init__(detail)
+        self.status, self.detail, self.extra = status, detail, extra
+
+
+def now() -> str:
+    """The current time as ISO 8601 UTC text with milliseconds (the store's time format)."""
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+@dataclass(frozen=True)
+class SessionRequest:
+    """What the operator (or an external app) gives to start or resume a session.
+
+    Attributes:
+        participant: the participant's ID as typed (e.g. ``P07``); 1–64 printable characters.
+        site: where the session runs (a lab's name), for multi-site studies.
+        demographics: ``age`` (years), ``gender``, ``handedness``; each may be missing.
+        consent: whether the participant gave consent (required when the design asks for it).
+        index: the plan row (0-based); None: the lowest one no session of the study uses.
+        seed: the plan's seed; None: the design's.
+    """
+
+    participant: str
+    site: str = ""
+    demographics: dict = field(default_factory=dict)
+    consent: bool = False
+    index: int | None = None
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        code = self.participant
+        if not isinstance(code, str) or not code.strip() or len(code) > MAX_CODE_CHARS or \
+                not code.isprintable():
+            raise StudyError(422, f"participant: give an ID of 1 to {MAX_CODE_CHARS} printable "
+                                  f"characters (e.g. P07)")
+        if not isinstance(self.site, str) or len(self.site) > MAX_SITE_CHARS or \
+                not self.site.isprintable():
+            raise StudyError(422, f"site: at most {MAX_SITE_CHARS} printable characters")
+        if self.index is not None and not 0 <= self.index < 1_000_000:
+            raise StudyError(422, "index: must be between 0 and 999,999")
+        if self.seed is not None and not 0 <= self.seed < 2**63:
+            raise StudyError(422, "seed: must be between 0 and 2^63 - 1")
+        age = self.demographics.get("age")
+        if age is not None and (isinstance(age, bool) or not isinstance(age, int)
+                                or not 0 < age < 150):
+            raise StudyError(422, "demographics.age: must be a whole number of years (1-149)")
+        for name in ("gender", "handedness"):
+            value = self.demographics.get(name)
+            if value is not None and (not isinstance(value, str) or len(value) > 100
+                                      or not storable(value)):
+                raise StudyError(422, f"demographics.{name}: at most 100 characters of text "
+                                      f"(no NUL, no unpaired surrogate)")
+        unknown = set(self.demographics) - {"age", "gender", "handedness"}
+        if unknown:
+            raise StudyError(422, f"demographics: unknown field '{sorted(unknown)[0]}' (age, "
+                                  f"gender, handedness)")
+
+
+class DesignCache:
+    """The designs of the studies in a store, read once per study (their stored copies)."""
+
+    def __init__(self) -> None:
+        self._by_study: dict[int, Design] = {}
+
+    def get(self, conn: Connection, study_id: int) -> Design:
+        """The design stored with study ``study_id``."""
+        design = self._by_study.get(study_id)
+        if design is None:
+            text = conn.execute(select(studies.c.design).where(studies.c.id == study_id)).scalar_one()
+            design = self._by_study[study_id] = Design.from_json(text)
+        return design
+
+
+def design_summary(design: Design) -> dict:
+    """What the operator console shows of a design: name, title, description, the recommended
+    number of participants, the plan seed, and the participant fields it asks for."""
+    fields = getattr(design, "participant_fields", None)
+    asked = fields.model_dump(mode="json") if hasattr(fields, "model_dump") else (fields or {})
+    return {"name": design.name, "title": getattr(design, "title", ""),
+            "description": getattr(design, "description", ""),
+            "participants": getattr(design, "participants", None), "seed": design.seed,
+            "version": design.version, "participant_fields": asked}
+
+
+def _study_id(conn: Connection, design: Design, cache: DesignCache) -> int:
+    """The id of the study row for this design (its name and content), made if new."""
+    query = select(studies.c.id).where(studies.c.name == design.name,
+                                       studies.c.version == design.version)
+    study_id = conn.execute(query).scalar()
+    if study_id is None:
+        study_id = conn.execute(insert(studies).values(
+            name=design.name, version=design.version, design=design.to_json(),
+            created_at=now()).returning(studies.c.id)).scalar_one()
+        cache._by_study[study_id] = design
+    return study_id
+
+
+def _design_key(name: str) -> int:
+    """A design's 64-bit advisory lock key (signed, as PostgreSQL takes it)."""
+    digest = hashlib.sha256(f"realpen study design {name}".encode()).digest()
+    return int.from_bytes(digest[:8], "big", signed=True)
+
+
+def _free_index(conn: Connection, study_names: str) -> int:
+    """The lowest plan row no session of a design (any version of it) uses yet."""
+    used = set(conn.execute(select(sessions.c.plan_index).join(studies).where(
+        studies.c.name == study_names)).scalars())
+    index = 0
+    while index in used:
+        index += 1
+    return index
+
+
+def _existing_session(conn: Connection, name: str, code: str) -> int | None:
+    return conn.execute(
+        select(sessions.c.id).join(participants, sessions.c.participant_id == participants.c.id)
+        .join(studies, sessions.c.study_id == studies.c.id)
+        .where(studies.c.name == name, participants.c.code == code)).scalar()
+
+
+def _requires_consent(design: Design) -> bool:
+    fields = getattr(design, "participant_fields", None)
+    return bool(getattr(fields, "consent", None))
+
+
+def open_session(conn: Connection, design: Design, request: SessionRequest,
+                 cache: DesignCache) -> tuple[dict, bool]:
+    """Start a session of ``design`` for a participant, or find the one they have.
+
+    A participant is known by the design's name and their ID: asking again returns their session
+    (whatever version of the design it was started with), which is how a session resumes.
+
+    Returns:
+        (the session's :func:`progress`, whether it was created now).
+
+    Raises:
+        StudyError: 422 for missing consent, or a plan row another session of the design uses.
+    """
+    code = request.participant.strip()
+    if conn.dialect.name == "postgresql":
+        # Servers sharing a database create a design's sessions one at a time, so that a
+        # participant gets one session and a plan row one participant, whatever the design's
+        # version on each server (held until the transaction ends).
+        conn.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": _design_key(design.name)})
+    existing = _existing_session(conn, design.name, code)
+    if existing is not None:
+        return progress(conn, existing, cache), False
+    if _requires_consent(design) and request.consent is not True:
+        raise StudyError(422, f"consent: the design '{design.name}' asks for the participant's "
+                              f"consent before the session starts")
+    study_id = _study_id(conn, design, cache)
+    if request.index is None:
+        index = _free_index(conn, design.name)
+    else:
+        index = request.index
+        if index in set(conn.execute(select(sessions.c.plan_index).join(studies).where(
+                studies.c.name == design.name)).scalars()):
+            raise StudyError(422, f"index: plan row {index} is used by another session of "
+                                  f"'{design.name}'")
+    seed = design.seed if request.seed is None else request.seed
+    plan = participant_plan(design, index, seed)
+    created = now()
+    demographics = request.demographics
+    participant_id = conn.execute(insert(participants).values(
+        study_id=study_id, code=code, site=request.site, age=demographics.get("age"),
+        gender=demographics.get("gender"), handedness=demographics.get("handedness"),
+        consent=bool(request.consent), created_at=created).returning(participants.c.id)).scalar_one()
+    session_id = conn.execute(insert(sessions).values(
+        study_id=study_id, participant_id=participant_id, plan_index=index, seed=seed,
+        site=request.site, state="running", started_at=created).returning(sessions.c.id)).scalar_one()
+    conn.execute(insert(trials), [{
+        "session_id": session_id, "n": trial.n, "block": trial.block,
+        "block_index": trial.block_index, "phase": trial.phase, "condition": trial.condition,
+        "modality": trial.modality, "pen": trial.pen, "ink": trial.ink,
+        "repetition": trial.repetition, "plan": json.dumps(trial.to_json(), sort_keys=True)}
+        for trial in plan])
+    return progress(conn, session_id, cache), True
+
+
+def _session_row(conn: Connection, session_id: int):
+    row = conn.execute(_session_rows().where(sessions.c.id == session_id)).mappings().first()
+    if row is None:
+        raise StudyError(404, f"no session {session_id}")
+    return row
+
+
+def _first_unanswered(conn: Connection, session_id: int) -> int | None:
+    return conn.execute(select(func.min(trials.c.n)).where(
+        trials.c.session_id == session_id, trials.c.answered_at.is_(None))).scalar()
+
+
+def _progress_of(row, blocks: list, design: Design, next_n: int | None) -> dict:
+    total = sum(block["trials"] for block in blocks)
+    answered = sum(block["answered"] for block in blocks)
+    return {"session": row["id"], "design": row["design"], "title": getattr(design, "title", ""),
+            "participant": row["code"], "site": row["site"], "index": row["plan_index"],
+            "seed": row["seed"], "state": row["state"], "trials": total, "answered": answered,
+            "next": None if row["state"] == "finished" else next_n,
+            "blocks": [{"block": block["block"], "block_index": block["block_index"],
+                        "trials": block["trials"], "answered": block["answered"]}
+                       for block in blocks],
+            "started_at": row["started_at"], "finished_at": row["finished_at"]}
+
+
+def _blocks(conn: Connection, session_ids: list[int]) -> tuple[dict, dict]:
+    """Per session: its blocks' trial and answer counts, and its first unanswered trial."""
+    counts = conn.execute(
+        select(trials.c.session_id, trials.c.block_index, trials.c.block,
+               func.count().label("trials"), func.count(trials.c.answered_at).label("answered"),
+               func.min(case((trials.c.answered_at.is_(None), trials.c.n))).label("first_open"))
+        .where(trials.c.session_id.in_(session_ids))
+        .group_by(trials.c.session_id, trials.c.block_index, trials.c.block)
+        .order_by(trials.c.session_id, trials.c.block_index)).mappings().all()
+    blocks: dict[int, list] = {session_id: [] for session_id in session_ids}
+    first_open: dict[int, int | None] = dict.fromkeys(session_ids)
+    for block in counts:
+        blocks[block["session_id"]].append(block)
+        if block["first_open"] is not None and (first_open[block["session_id"]] is None or
+                                                block["first_open"] < first_open[block["session_id"]]):
+            first_open[block["session_id"]] = block["first_open"]
+    return blocks, first_open
+
+
+def _session_rows():
+    return (select(sessions, studies.c.name.label("design"), participants.c.code)
+            .join(studies, sessions.c.study_id == studies.c.id)
+            .join(participants, sessions.c.participant_id == participants.c.id))
+
+
+def progress(conn: Connection, session_id: int, cache: DesignCache) -> dict:
+    """A session's progress: state, trials answered of planned, the next trial, per block.
+
+    Raises:
+        StudyError: 404 when there is no such session.
+    """
+    row = _session_row(conn, session_id)
+    blocks, first_open = _blocks(conn, [session_id])
+    return _progress_of(row, blocks[session_id], cache.get(conn, row["study_id"]),
+                        first_open[session_id])
+
+
+def list_sessions(conn: Connection, cache: DesignCache, limit: int = 200) -> list[dict]:
+    """The progress of the newest ``limit`` sessions, newest first (two queries in all)."""
+    rows = conn.execute(_session_rows().order_by(sessions.c.id.desc()).limit(limit)) \
+        .mappings().all()
+    blocks, first_open = _blocks(conn, [row["id"] for row in rows])
+    return [_progress_of(row, blocks[row["id"]], cache.get(conn, row["study_id"]),
+                         first_open[row["id"]]) for row in rows]
+
+
+def trial_plan(conn: Connection, session_id: int, n: int,
+               cache: DesignCache) -> tuple[PlannedTrial, Design]:
+    """A session's planned trial ``n`` and the session's design.
+
+    Raises:
+        StudyError: 404 for no such session or trial.
+    """
+    row = _session_row(conn, session_id)
+    plan = conn.execute(select(trials.c.plan).where(
+        trials.c.session_id == session_id, trials.c.n == n)).scalar()
+    if plan is None:
+        raise StudyError(404, f"session {session_id} has no trial {n}")
+    return _planned(plan), cache.get(conn, row["study_id"])
+
+
+def trial_exists(conn: Connection, session_id: int, n: int) -> bool:
+    """Whether study session ``session_id`` has a trial ``n`` (a stroke may name it)."""
+    return conn.execute(select(trials.c.n).where(trials.c.session_id == session_id,
+                                                 trials.c.n == n)).first() is not None
+
+
+def _planned(plan_json: str) -> PlannedTrial:
+    data = json.loads(plan_json)
+    data["questions"] = tuple(data.get("questions", ()))
+    return PlannedTrial(**data)
+
+
+def pen_profile(design: Design, pen: str) -> str:
+    """The profile the live app plays for a design's pen (its ``profile``, else its id); empty
+    for a trial without a pen."""
+    return design.pen(pen).profile_ref if pen else ""
+
+
+def _question_json(design: Design, question_id: str) -> dict:
+    question = design.question(question_id)
+    data = {"id": question.id, "type": question.type, "text": question.text,
+            "required": bool(getattr(question, "required", True))}
+    if question.type == "likert":
+        data["points"] = question.points
+        data["anchors"] = {str(point): label for point, label in (question.anchors or {}).items()}
+    elif question.type == "choice":
+        data["choices"] = list(question.choices)
+    return data
+
+
+def next_trial(conn: Connection, session_id: int, cache: DesignCache) -> dict:
+    """The first unanswered trial of a session, with everything the page needs to run it, or
+    ``{"done": true}`` when every trial is answered or the session was finished.
+
+    Raises:
+        StudyError: 404 when there is no such session.
+    """
+    row = _session_row(conn, session_id)
+    n = None if row["state"] == "finished" else _first_unanswered(conn, session_id)
+    if n is None:
+        return {"done": True, "session": session_id, "state": row["state"]}
+    design = cache.get(conn, row["study_id"])
+    plan = _planned(conn.execute(select(trials.c.plan).where(
+        trials.c.session_id == session_id, trials.c.n == n)).scalar_one())
+    total = conn.execute(select(func.count()).where(trials.c.session_id == session_id)).scalar_one()
+    tactile = plan.modality in ("tactile", "audio-tactile")
+    return {"trial": n, "total": total, "session": session_id, "state": row["state"],
+            "block": plan.block, "block_index": plan.block_index, "phase": plan.phase,
+            "condition": plan.condition, "modality": plan.modality,
+            "live_modality": LIVE_MODALITY.get(plan.modality, "none"), "pen": plan.pen,
+            "profile": pen_profile(design, plan.pen),
+            "ink": plan.ink, "repetition": plan.repetition, "task": plan.task,
+            "writing": plan.writing, "feedback": plan.feedback,
+            "tactile_url": f"/api/sessions/{session_id}/trials/{n}/tactile.wav" if tactile else None,
+            "questions": [_question_json(design, question) for question in plan.questions]}
+
+
+def _stored_answer(conn: Connection, session_id: int, n: int) -> dict:
+    rows = conn.execute(select(answers.c.question, answers.c.answer).where(
+        answers.c.session_id == session_id, answers.c.n == n)).all()
+    rt_ms = conn.execute(select(trials.c.rt_ms).where(
+        trials.c.session_id == session_id, trials.c.n == n)).scalar()
+    return {"answers": dict(rows), "rt_ms": rt_ms}
+
+
+def _check_answers(design: Design, plan: PlannedTrial, given: dict) -> list[tuple[str, str, Any]]:
+    """Validate a trial's answers against its questions: (question, stored text, correct)."""
+    if not isinstance(given, dict):
+        raise StudyError(422, "answers: must be an object of question id -> answer")
+    unknown = [question for question in given if question not in plan.questions]
+    if unknown:
+        raise StudyError(422, f"{unknown[0]}: not a question of trial {plan.n} (its questions: "
+                              f"{', '.join(plan.questions) or 'none'})")
+    rows = []
+    for question_id in plan.questions:
+        question = design.question(question_id)
+        if question_id not in given or given[question_id] is None:
+            if getattr(question, "required", True):
+                raise StudyError(422, f"{question_id}: an answer is required")
+            continue
+        try:
+            stored = question.validate_answer(given[question_id])
+        except ValueError as error:
+            raise StudyError(422, f"{question_id}: {error}") from None
+        if not storable(stored):
+            raise StudyError(422, f"{question_id}: text with a NUL or an unpaired surrogate")
+        if stored == "" and not getattr(question, "required", True):
+            continue  # an empty optional answer is no answer, as a missing one
+        rows.append((question_id, stored, question.is_correct(stored, plan)))
+    return rows
+
+
+def answer_trial(conn: Connection, session_id: int, n: int, given: dict, rt_ms: float,
+                 cache: DesignCache) -> dict:
+    """Store the answers to trial ``n`` and its response time (ms from the trial's start to the
+    answer, measured by the page); the session finishes with its last trial.
+
+    Returns:
+        ``{"trial": n, "next": the next unanswered trial or None}``, and for a trial with
+        feedback (training) ``"feedback"``: per question that has a right answer,
+        ``{"correct": bool, "answer": the right answer}``.
+
+    Raises:
+        StudyError: 404 no such session or trial; 409 the trial was answered already (``extra``
+            holds the stored answer), is not the next one (``extra["next"]``), or the session is
+            finished; 422 an invalid answer (the detail names the question) or response time.
+    """
+    row = _session_row(conn, session_id)
+    plan_json = conn.execute(select(trials.c.plan, trials.c.answered_at).where(
+        trials.c.session_id == session_id, trials.c.n == n)).first()
+    if plan_json is None:
+        raise StudyError(404, f"session {session_id} has no trial {n}")
+    if plan_json.answered_at is not None:
+        raise StudyError(409, f"trial {n} of session {session_id} is answered already",
+                         **_stored_answer(conn, session_id, n))
+    if row["state"] == "finished":
+        raise StudyError(409, f"session {session_id} is finished")
+    expected = _first_unanswered(conn, session_id)
+    if expected != n:
+        raise StudyError(409, f"trial {n} is not the next one of session {session_id} (next: "
+                              f"{expected})", next=expected)
+    if isinstance(rt_ms, bool) or not isinstance(rt_ms, int | float) or not math.isfinite(rt_ms) \
+            or not 0 <= rt_ms <= MAX_RT_MS:
+        raise StudyError(422, f"rt_ms: must be a number of milliseconds from 0 to {MAX_RT_MS:.0f}")
+    design = cache.get(conn, row["study_id"])
+    plan = _planned(plan_json.plan)
+    rows = _check_answers(design, plan, given)
+    answered_at = now()
+    changed = conn.execute(update(trials).where(
+        and_(trials.c.session_id == session_id, trials.c.n == n, trials.c.answered_at.is_(None)))
+        .values(answered_at=answered_at, rt_ms=float(rt_ms))).rowcount
+    if changed != 1:  # another server answered it between our check and our write
+        raise StudyError(409, f"trial {n} of session {session_id} is answered already",
+                         **_stored_answer(conn, session_id, n))
+    if rows:
+        conn.execute(insert(answers), [{"session_id": session_id, "n": n, "question": question,
+                                        "answer": text, "correct": correct}
+                                       for question, text, correct in rows])
+    following = _first_unanswered(conn, session_id)
+    if following is None:
+        conn.execute(update(sessions).where(sessions.c.id == session_id)
+                     .values(state="finished", finished_at=answered_at))
+    reply = {"trial": n, "next": following}
+    if plan.feedback:
+        reply["feedback"] = {question: {"correct": bool(correct), "answer": plan.pen}
+                             for question, _, correct in rows if correct is not None}
+    return reply
+
+
+def set_state(conn: Connection, session_id: int, state: str, cache: DesignCache) -> dict:
+    """Pause, resume or finish a session; returns its :func:`progress`.
+
+    A finished session stays finished: its unanswered trials are not offered again.
+
+    Raises:
+        StudyError: 404 no such session; 422 an unknown state; 409 resuming a finished session.
+    """
+    if state not in SESSION_STATES:
+        raise StudyError(422, f"state: must be one of {', '.join(SESSION_STATES)}")
+    row = _session_row(conn, session_id)
+    if row["state"] == "finished" and state != "finished":
+        raise StudyError(409, f"session {session_id} is finished and cannot be resumed")
+    if row["state"] != state:
+        values = {"state": state}
+        if state == "finished":
+            values["finished_at"] = now()
+        # never over a finish another server made meanwhile
+        conn.execute(update(sessions).where(sessions.c.id == session_id,
+                                            sessions.c.state != "finished").values(**values))
+    return progress(conn, session_id, cache)
