@@ -379,6 +379,33 @@ CORPUS = [
         "-o out.wav", "folder"),
     bad("export-output-folder", "export pencil -f hjif -o folder --force", "folder"),
     bad("serve-store-folder", "serve --port 0 --store folder", "folder"),
+    # studies
+    bad("study-plan-unknown-design", "study plan study9 -n 12", "study9"),
+    bad("study-plan-missing-design", "study plan none.yaml -n 12", "none.yaml"),
+    bad("study-plan-folder-design", "study plan folder -n 2", "folder"),
+    bad("study-plan-garbage-yaml", "study plan d.yaml -n 2", "d.yaml",
+        existing("d.yaml", b"name: [x\n")),
+    bad("study-plan-csv-is-design", "study plan d.yaml -n 2 --csv d.yaml --force", "d.yaml",
+        existing("d.yaml", b"name: x\n")),
+    bad("study-plan-csv-exists", "study plan study1 -n 2 --csv t.csv", "t.csv", existing("t.csv")),
+    bad("study-plan-csv-is-folder", "study plan study1 -n 2 --csv folder --force", "folder"),
+    bad("study-plan-seed-huge", f"study plan study1 -n 2 --seed {HUGE}", "--seed"),
+    bad("study-plan-participants-zero", "study plan study1 -n 0", "--participants"),
+    bad("study-plan-participants-many", "study plan study1 -n 2000", "--participants"),
+    bad("study-designs-extra-argument", "study designs x", "study designs"),
+    bad("study-schema-output-is-folder", "study schema -o folder --force", "folder"),
+    bad("study-export-missing-store", "study export --store none.sqlite -o answers.csv", "none.sqlite"),
+    bad("study-export-not-a-store", "study export --store rec.wav -o answers.csv", "rec.wav"),
+    bad("study-export-over-store", "study export --store store.sqlite -o store.sqlite --force",
+        "store.sqlite"),
+    bad("study-export-over-wal", "study export --store store.sqlite -o store.sqlite-wal --force",
+        "store.sqlite-wal"),
+    bad("study-export-output-folder", "study export --store store.sqlite -o folder --force",
+        "folder"),
+    bad("study-export-unknown-design", "study export --store store.sqlite --design study9 -o answers.csv",
+        "study9"),
+    bad("study-export-bad-url", "study export --store postgresql://u:secret@/x?host=/nonexistent "
+        "-o answers.csv", "postgresql://u:***@"),
 ]
 
 
