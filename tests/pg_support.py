@@ -65,12 +65,13 @@ def running_postgres() -> Iterator:
     def run(*command: str) -> None:
         if as_user is None:  # root without runuser: su takes one shell command
             command = ("su", "postgres", "-c", " ".join(shlex.quote(part) for part in command))
+        # LC_ALL=C: a locale the machine has not generated would stop the server starting.
         subprocess.run([*(as_user or []), *command], check=True, capture_output=True, text=True,
-                       timeout=120)
+                       timeout=120, env={**os.environ, "LC_ALL": "C"})
 
     try:
         run(str(folder_bin / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres",
-            "-E", "UTF8", "--no-sync")
+            "-E", "UTF8", "--no-locale", "--no-sync")
         run(str(folder_bin / "pg_ctl"), "-D", str(data), "-l", str(log), "-w", "-t", "60",
             "-o", f"-k {folder} -c listen_addresses='' -p {PORT}", "start")
     except subprocess.CalledProcessError as error:

@@ -404,6 +404,8 @@ CORPUS = [
         "folder"),
     bad("study-export-unknown-design", "study export --store store.sqlite --design study9 -o answers.csv",
         "study9"),
+    bad("study-export-password-in-query", "study export --store "
+        "postgresql://u@/x?host=/nonexistent&password=hunter2 -o answers.csv", "password=***"),
     bad("study-export-bad-url", "study export --store postgresql://u:secret@/x?host=/nonexistent "
         "-o answers.csv", "postgresql://u:***@"),
 ]

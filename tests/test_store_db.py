@@ -12,12 +12,13 @@ import threading
 import pytest
 from conftest import assert_clean_failure, run_cli, store_rows
 from sqlalchemy import Float, create_engine, insert, make_url, select, text
-from sqlalchemy.exc import IntegrityError, OperationalError, ResourceClosedError
+from sqlalchemy.exc import DBAPIError, IntegrityError, OperationalError, ResourceClosedError
 from sqlalchemy.pool import NullPool
 
 from realpen.errors import RealPenError
 from realpen.live.store import StrokeStore, export_csv
 from realpen.study.db import SQLITE_USER_VERSION, head_revision, hide_password, open_database
+from realpen.study.export import export_trials
 from realpen.study.tables import metadata, studies
 
 STROKE = dict(pen="pencil", profile_version="0" * 12, modality="none", ink="visible",
@@ -153,8 +154,12 @@ def test_an_old_sqlite_store_is_upgraded_in_place_with_its_rows(tmp_path, versio
             db.executemany("INSERT INTO samples VALUES (?, ?, ?, 1, 2, 0.5, 0, 0, 0)",
                            [(stroke_id, 0, 0.0), (stroke_id, 1, 0.01)])
     db.close()
-    # Reading never changes a file: an export reads the old schema as it is.
+    # Reading never changes a file: an export reads the old schema as it is; the study
+    # export, which needs the study tables, says how to upgrade.
     assert export_csv(path, tmp_path / "old.csv") == (2, 4)
+    with pytest.raises(RealPenError, match="start realpen serve on it once to upgrade it"):
+        export_trials(path, tmp_path / "trials.csv")
+    assert not (tmp_path / "trials.csv").exists()
     assert store_rows(path, "PRAGMA user_version") == [(version,)]
     reader = open_database(path, create=False)
     assert reader.revision is None
@@ -312,6 +317,44 @@ def test_one_failing_operation_does_not_fail_the_others_of_its_batch(store_targe
     assert sorted(store_rows(store_target, "SELECT name FROM studies")) == [("a",), ("c",)]
     with pytest.raises(ResourceClosedError, match="closed"):
         store.submit(add_study, "d").result(timeout=5)
+
+
+def test_an_error_an_operation_swallows_fails_its_whole_batch(store_target):
+    """On PostgreSQL a caught statement error leaves the transaction aborted, and COMMIT would
+    silently roll back what earlier operations were told was stored."""
+    from sqlalchemy import text
+
+    def swallow(conn):
+        try:
+            conn.execute(text("SELECT 1 / 0"))
+        except DBAPIError:
+            pass
+        return "swallowed"
+
+    store = StrokeStore(store_target)
+    gate = threading.Event()
+    try:
+        started = threading.Event()
+        held = store.submit(lambda conn: (started.set(), gate.wait(30)))
+        assert started.wait(30)
+        futures = [store.submit(add_study, "first"), store.submit(swallow),
+                   store.submit(add_study, "third")]
+        gate.set()
+        held.result(timeout=30)
+        outcomes = []
+        for future in futures:
+            try:
+                outcomes.append(future.result(timeout=30))
+            except Exception as error:  # noqa: BLE001 - what each got is the point
+                outcomes.append(type(error).__name__)
+        assert isinstance(store.submit(add_study, "after").result(timeout=30), int)
+    finally:
+        store.close()
+    names = sorted(name for (name,) in store_rows(store_target, "SELECT name FROM studies"))
+    if "://" in str(store_target):  # PostgreSQL: the aborted batch fails whole, nothing claimed
+        assert outcomes[0] == outcomes[1] == outcomes[2] == "_BatchLost" and names == ["after"]
+    else:  # SQLite's transaction survives a failed statement: all three are stored
+        assert outcomes[1] == "swallowed" and names == ["after", "first", "third"]
 
 
 def test_a_lost_postgresql_connection_fails_its_batch_and_the_next_reconnects(postgres_server):

@@ -307,7 +307,7 @@ def test_values_are_taken_as_sent_and_storable(client, store_path):
     for n in (2**31, 2**53):  # ids are 32-bit in the store
         assert client.get(f"/api/sessions/{n}").status_code == 422
         assert client.get(f"/api/sessions/{session}/trials/{n}/tactile.wav").status_code == 422
-    # an empty optional answer is no answer: no row
+    # an optional question left empty is stored as "" (its trial keeps its row)
     while (trial := client.get(f"/api/sessions/{session}/next").json()).get("trial"):
         given = answers_for(trial)
         if "comments" in given:
@@ -317,7 +317,8 @@ def test_values_are_taken_as_sent_and_storable(client, store_path):
             assert nul.status_code == 422 and nul.json()["detail"].startswith("comments")
         assert client.post(f"/api/sessions/{session}/trials/{trial['trial']}",
                            json={"answers": given, "rt_ms": 1.0}).status_code == 201
-    assert count(store_path, "SELECT COUNT(*) FROM answers WHERE question='comments'") == 0
+    assert count(store_path, "SELECT COUNT(*) FROM answers WHERE question='comments' "
+                             "AND answer=''") == 1
 
 
 def json_bytes(value) -> bytes:
@@ -356,3 +357,21 @@ def test_the_documented_python_example_runs_a_whole_session(client, store_path):
     progress = client.get("/api/sessions").json()["sessions"][0]
     assert (progress["participant"], progress["state"]) == ("P05", "finished")
     assert count(store_path, "SELECT COUNT(*) FROM trials WHERE answered_at IS NOT NULL") == 93
+
+
+def test_a_shutdown_while_the_database_cannot_answer_still_closes_the_store(tmp_path, monkeypatch):
+    from sqlalchemy.exc import OperationalError
+
+    from realpen.live.app import LiveSettings, create_app
+
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    state = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3")).state.live
+
+    def no_answer(timeout=None):
+        raise OperationalError("SELECT count(*)", {}, Exception("server closed the connection"))
+
+    monkeypatch.setattr(state.store, "count", no_answer)
+    state.shutdown()
+    assert state.stopped and state.final_counts is None
+    assert "server closed the connection" in state.count_problem
+    assert state.store.submit(lambda conn: 1).exception(timeout=5) is not None  # closed

@@ -99,8 +99,12 @@ def serve(
     finally:
         signal.signal(signal.SIGTERM, previous)
         sock.close()
-        if state.final_counts is None:  # the app never shut down (it never started serving)
+        if not state.stopped:  # the app never shut down (it never started serving)
             state.store.discard()
+    if state.count_problem is not None:
+        print(f"stopped: the store is closed but could not be counted ({state.count_problem}) "
+              f"({state.store.display})", flush=True)
+        return
     strokes, samples = state.final_counts or (0, 0)
     print(f"stopped: the store holds {strokes} strokes, {samples} samples "
           f"({state.store.display})", flush=True)

@@ -37,7 +37,7 @@ from realpen.live.catalog import Catalog
 from realpen.live.device import PenDevice, SimulatedDevice
 from realpen.live.messages import MAX_MESSAGE_BYTES, MAX_SAMPLES, MODALITIES, PROTOCOL
 from realpen.live.session import Session
-from realpen.live.store import StrokeStore
+from realpen.live.store import SHUTDOWN_WAIT_S, STORE_ERRORS, StrokeStore, error_line
 from realpen.live.study_routes import add_study_routes, load_designs, validation_line
 
 STATIC_DIR = Path(str(files(__package__) / "static"))
@@ -99,6 +99,8 @@ class LiveState:
     pages: dict[str, Session] = field(default_factory=dict)  # page id → its live session
     final_counts: tuple[int, int] | None = None  # (strokes, samples) when the store closed
     designs: dict = field(default_factory=dict)  # the study designs offered, by name
+    stopped: bool = False  # shut down (the store closed)
+    count_problem: str | None = None  # why final_counts is None after the shutdown
 
     def open_session(self) -> Session:
         session = Session(self.catalog, self.store, self.device, self.settings.max_message_bytes,
@@ -111,13 +113,21 @@ class LiveState:
         await session.close()
 
     def shutdown(self) -> None:
-        """Close the pages' sessions, the store and the device (once; later calls do nothing)."""
-        if self.final_counts is not None:
+        """Close the pages' sessions, the store and the device (once; later calls do nothing).
+
+        ``final_counts`` is then what the store holds, or None when the database could not say
+        (``count_problem`` says why, in one line); the store is closed either way.
+        """
+        if self.stopped:
             return
+        self.stopped = True
         for session in list(self.sessions.values()):
             session.close_now()
         self.sessions.clear()
-        self.final_counts = self.store.count()
+        try:
+            self.final_counts = self.store.count(SHUTDOWN_WAIT_S)
+        except (*STORE_ERRORS, TimeoutError) as error:
+            self.count_problem = error_line(error) if str(error) else "no answer in time"
         self.store.close()
         self.device.close()
 

@@ -60,14 +60,15 @@ from realpen.study.db import Database, open_database, store_file
 from realpen.study.tables import END_REASONS, samples, strokes
 
 __all__ = ["StrokeStore", "StrokeRef", "export_csv", "SAMPLE_FIELDS", "STROKE_FIELDS",
-           "CSV_COLUMNS", "CHECKPOINT_S", "WAL_CHECKPOINT_BYTES", "END_REASONS", "STORE_ERRORS",
-           "error_line"]
+           "CSV_COLUMNS", "SHUTDOWN_WAIT_S", "CHECKPOINT_S", "WAL_CHECKPOINT_BYTES",
+           "END_REASONS", "STORE_ERRORS", "error_line"]
 
 CHECKPOINT_S = 1.0
 WAL_CHECKPOINT_BYTES = 8 * 1024 * 1024
 """The journal is checkpointed and truncated as soon as it passes this size (bytes)."""
 BUSY_TIMEOUT_MS = 5000  # how long an SQLite write waits for another process's lock
 MAX_BATCH = 1024  # operations per transaction: bounds how long one commit holds the writer
+SHUTDOWN_WAIT_S = 30.0  # how long a server's shutdown waits for the database to answer
 READERS = 2  # threads (and connections) that run read operations beside the writer
 STORE_ERRORS = (SQLAlchemyError, sqlite3.Error)
 """What a store operation's future may fail with when the database cannot do it (the driver's
@@ -132,6 +133,10 @@ class _Statement:
         if self.positions == names and not self.defaults:
             return rows
         return [self.bind(dict(zip(names, row))) for row in rows]
+
+
+class _BatchLost(SQLAlchemyError):
+    """The batch's transaction cannot be committed: every operation of it fails."""
 
 
 def error_line(error: BaseException) -> str:
@@ -406,6 +411,19 @@ class StrokeStore:
             return not conn.connection.driver_connection.in_transaction
         return False
 
+    def _left_unusable(self, conn: Connection) -> bool:
+        """After an operation returned: whether the transaction can no longer commit what the
+        batch did (gone, or on PostgreSQL aborted by an error the operation caught and did not
+        roll back; COMMIT would then silently roll everything back)."""
+        if self._transaction_lost(conn):
+            return True
+        if self.dialect == "postgresql":
+            from psycopg.pq import TransactionStatus
+
+            status = conn.connection.driver_connection.info.transaction_status
+            return status != TransactionStatus.INTRANS
+        return False
+
     def _run_one(self, conn: Connection, operation: Callable, args: tuple, own: bool):
         """One operation in its own SAVEPOINT; its error rolls back that savepoint only, unless
         the transaction itself is gone (then the error ends the batch)."""
@@ -418,6 +436,9 @@ class StrokeStore:
                     raise
                 savepoint.rollback()
                 raise
+            if self._left_unusable(conn):  # an error swallowed inside the operation
+                raise _BatchLost("an operation left the transaction aborted; nothing of the "
+                                 "batch was stored")
             savepoint.commit()
             return value
         self._run(conn, _SAVEPOINT)
@@ -450,7 +471,7 @@ class StrokeStore:
                     try:
                         outcomes.append((future, self._run_one(conn, operation, args, own), None))
                     except Exception as error:  # this operation only; the batch goes on
-                        if self._transaction_lost(conn):
+                        if isinstance(error, _BatchLost) or self._transaction_lost(conn):
                             raise
                         outcomes.append((future, None, error))
         except Exception as error:  # nothing of the batch is stored
@@ -649,9 +670,13 @@ class StrokeStore:
         """:meth:`end`, waiting for the commit."""
         self.end(stroke_id, reason).result()
 
-    def count(self) -> tuple[int, int]:
-        """(strokes, samples) in the store (after everything submitted before)."""
-        return self._enqueue(self._count, (), own=True).result()
+    def count(self, timeout: float | None = None) -> tuple[int, int]:
+        """(strokes, samples) in the store (after everything submitted before).
+
+        Raises:
+            TimeoutError: no answer within ``timeout`` s (a database that stopped answering).
+        """
+        return self._enqueue(self._count, (), own=True).result(timeout)
 
     def close(self) -> None:
         """End strokes still open (reason ``shutdown``), commit, checkpoint, and close the
@@ -671,7 +696,10 @@ class StrokeStore:
         """Close, and remove the file if this store created it and it holds no stroke: for a
         server that fails to start, so that it leaves nothing behind (a PostgreSQL database is
         never removed)."""
-        empty = not self._closed and self.count() == (0, 0)
+        try:
+            empty = not self._closed and self.count(SHUTDOWN_WAIT_S) == (0, 0)
+        except (*STORE_ERRORS, TimeoutError):
+            empty = False  # not known to be empty: keep it
         self.close()
         if empty:
             self.database.remove_files()

@@ -40,6 +40,7 @@ __all__ = ["add_study_routes", "load_designs", "validation_line", "SessionBody",
            "StateBody", "MAX_ANSWER_CHARS"]
 
 MAX_ANSWER_CHARS = 2000
+REQUEST_WAIT_S = 30.0  # a request waits at most this long for the store, then gets 503
 Id = Annotated[int, Field(ge=1, le=MAX_ID)]
 
 
@@ -112,7 +113,11 @@ async def _outcome(future):
     from realpen.live.store import STORE_ERRORS, error_line
 
     try:
-        return await asyncio.wrap_future(future)
+        return await asyncio.wait_for(asyncio.wrap_future(future), REQUEST_WAIT_S)
+    except TimeoutError:
+        # A write may still be made (the store never cancels one): asking again gives 409.
+        raise study.StudyError(503, f"the store did not answer within {REQUEST_WAIT_S:g} s; "
+                                    f"try again") from None
     except IntegrityError as error:
         raise study.StudyError(409, f"another request changed this first; ask again "
                                     f"({error_line(error)})") from None

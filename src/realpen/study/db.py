@@ -116,12 +116,16 @@ def hide_password(target: str | os.PathLike) -> str:
 
     >>> hide_password("postgresql://ann:s3cret@db.lab.example/realpen")
     'postgresql://ann:***@db.lab.example/realpen'
+    >>> hide_password("postgresql://ann@/realpen?host=/run&password=s3cret&port=1")
+    'postgresql://ann@/realpen?host=/run&password=***&port=1'
     """
     shown = os.fspath(target)
     if "://" not in shown:
         return shown
-    # A password ends at the first "@" (one inside it must be written %40).
-    return re.sub(r"^([^:/?#]+://[^:/?#@]*:)[^@]*@", r"\1***@", shown)
+    # A password ends at the first "@" (one inside it must be written %40); one may also be
+    # given in the query (``?password=…``).
+    shown = re.sub(r"^([^:/?#]+://[^:/?#@]*:)[^@]*@", r"\1***@", shown)
+    return re.sub(r"([?&]password=)[^&#]*", r"\1***", shown, flags=re.IGNORECASE)
 
 
 def store_file(target: str | os.PathLike) -> Path | None:
@@ -426,15 +430,24 @@ def _alembic(connection, command_name: str, revision: str) -> None:
 def _postgresql_message(error: BaseException, url: URL) -> str:
     """The driver's message in one line, without the password should it quote it."""
     message = " ".join(str(getattr(error, "orig", None) or error).split())
-    if url.password:
-        message = message.replace(str(url.password), "***")
+    secrets = [url.password, url.query.get("password")]
+    for secret in secrets:
+        for text_ in ([secret] if isinstance(secret, str) else list(secret or ())):
+            if text_:
+                message = message.replace(str(text_), "***")
     return message
 
 
 def _open_postgresql(url: URL, shown: str, create: bool) -> Database:
+    # A database that stops answering (a network gone quiet) is noticed within about half a
+    # minute rather than the kernel's quarter of an hour: the writer's batch then fails and the
+    # pages and the API say so, instead of waiting for ever.
     engine = create_engine(url, pool_pre_ping=True,
                            connect_args={"connect_timeout": CONNECT_TIMEOUT_S,
-                                         "application_name": "realpen"})
+                                         "application_name": "realpen",
+                                         "keepalives": 1, "keepalives_idle": 10,
+                                         "keepalives_interval": 5, "keepalives_count": 3,
+                                         "tcp_user_timeout": 30_000})
     try:
         try:
             connection = engine.connect()

@@ -22,9 +22,10 @@
 The store is read in one read transaction: a consistent snapshot (what a server commits
 meanwhile is in none of the files) that never blocks the live server's writes (SQLite's WAL
 journal, PostgreSQL's MVCC); the export takes no writer's lock, so it runs while ``realpen
-serve`` writes. (Opening a store of an older schema brings it up to date first, as every
-opening does.) Every file is written atomically: a failure leaves none of them behind, and
-leaves earlier files of those names as they were.
+serve`` writes. Reading never changes a store: one from before the studies (an older
+RealPen's) is refused in one line that says to start ``realpen serve`` on it once. Every file
+is written atomically: a failure leaves none of them behind, and leaves earlier files of
+those names as they were.
 """
 
 from __future__ import annotations
@@ -106,10 +107,16 @@ def sidecar_path(csv_path: str | os.PathLike) -> Path:
 # ---- opening the store -----------------------------------------------------------------------
 
 def _open(target: str | os.PathLike) -> Database:
-    """Open an existing store (never create one) as a reader: without the writer's lock."""
+    """Open an existing store (never create one) as a reader: without the writer's lock, and
+    as it is (a store from before the studies is refused in one line)."""
     from realpen.study.db import open_database
 
-    return open_database(target, create=False, lock=False)
+    database = open_database(target, create=False, lock=False)
+    if database.revision in (None, "0001"):  # reading never migrates: say how to upgrade
+        database.close()
+        raise fail(database.display, "the store is older than RealPen's studies; start "
+                                     "realpen serve on it once to upgrade it")
+    return database
 
 
 def _check_outputs(target: str | os.PathLike, outputs: list[Path]) -> None:

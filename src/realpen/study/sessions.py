@@ -407,6 +407,9 @@ def _check_answers(design: Design, plan: PlannedTrial, given: dict) -> list[tupl
         if question_id not in given or given[question_id] is None:
             if getattr(question, "required", True):
                 raise StudyError(422, f"{question_id}: an answer is required")
+            # Every question asked gets its row: an optional one left unanswered is "", so the
+            # export keeps the trial (its time, its rt) even when nothing else was answered.
+            rows.append((question_id, "", None))
             continue
         try:
             stored = question.validate_answer(given[question_id])
@@ -414,8 +417,6 @@ def _check_answers(design: Design, plan: PlannedTrial, given: dict) -> list[tupl
             raise StudyError(422, f"{question_id}: {error}") from None
         if not storable(stored):
             raise StudyError(422, f"{question_id}: text with a NUL or an unpaired surrogate")
-        if stored == "" and not getattr(question, "required", True):
-            continue  # an empty optional answer is no answer, as a missing one
         rows.append((question_id, stored, question.is_correct(stored, plan)))
     return rows
 
