@@ -548,3 +548,53 @@ def test_a_reload_and_lost_replies_resume_where_the_server_says(server, browsers
     assert dict(store_rows(server, "SELECT trial, count(*) FROM strokes WHERE study_session = ? "
                                    "GROUP BY trial", session)) == {1: 2, 2: 1, 3: 1}
     assert set(tablet.problems) <= {NETWORK_FAILURE, CONFLICT}  # only what the test made
+
+
+# ---- 4. the server killed (SIGKILL) and started again while the participant answers ------------
+
+def test_the_participant_screen_goes_on_across_a_server_restart(browser, browsers, tmp_path):
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = str(probe.getsockname()[1])
+    tablet = browsers()
+    with serve(tmp_path, "--port", port) as first:
+        first.store = tmp_path / "strokes.sqlite3"
+        with httpx.Client(timeout=10) as client:
+            first.client = client
+            session = api(first, "POST", "/api/sessions", {"design": "study1", "participant": "P09",
+                                                           "consent": True}).json()["session"]
+        page = tablet.context.new_page()
+        page.goto(f"{first.base}study/participant?session={session}")
+        screen = Participant(page)
+        screen.start()
+        for n in (1, 2):
+            screen.trial(n)
+            screen.stroke(line(0.1, 0.3, 0.6, 0.3, 5))
+            screen.settle()
+            page.click("#done")
+            likert(page, "Q1", n + 1)
+            likert(page, "Q2", n + 2)
+            if n == 2:  # the server dies with the answer about to be sent
+                first.process.kill()
+                first.process.wait(timeout=10)
+            page.click("#next")
+        screen.wait("() => realpen.study.reconnecting === true")
+        assert page.locator("#reconnecting").is_visible()
+        with serve(tmp_path, "--port", port) as second:  # same port, same store
+            second.store = first.store
+            screen.trial(3)  # the answer got through to the new server; the session goes on
+            assert not page.locator("#reconnecting").is_visible()
+            with httpx.Client(timeout=10) as client:
+                second.client = client
+                progress = api(second, "GET", f"/api/sessions/{session}").json()
+    assert (progress["answered"], progress["next"]) == (2, 3)
+    stored = store_rows(first, "SELECT n, question, answer FROM answers ORDER BY n, question")
+    assert stored == [(1, "Q1", "2"), (1, "Q2", "3"), (2, "Q1", "3"), (2, "Q2", "4")]
+    strokes = store_rows(first, "SELECT trial, COUNT(*) FROM strokes WHERE study_session = ? "
+                                "GROUP BY trial ORDER BY trial", session)
+    assert strokes == [(1, 1), (2, 1)]
+    # only the refused connections while no server listened
+    assert all("net::ERR_CONNECTION_REFUSED" in problem for problem in tablet.problems), \
+        tablet.problems
