@@ -40,23 +40,10 @@ from sqlalchemy.pool import NullPool
 TESTS = Path(__file__).resolve().parents[1] / "tests"
 sys.path.insert(0, str(TESTS))
 
-from live_support import serve  # noqa: E402
+from live_support import serve, study_answers  # noqa: E402
 from pg_support import PostgresUnavailable, running_postgres  # noqa: E402
 
 DESIGN = "study2"
-
-
-def answers_for(trial: dict) -> dict:
-    """A valid answer to every question of a trial (the chosen pen varies)."""
-    given = {}
-    for question in trial["questions"]:
-        if question["type"] == "choice":
-            given[question["id"]] = question["choices"][trial["trial"] % len(question["choices"])]
-        elif question["type"] == "likert":
-            given[question["id"]] = 1 + trial["trial"] % question["points"]
-        else:
-            given[question["id"]] = f"trial {trial['trial']}"
-    return given
 
 
 class Client:
@@ -78,7 +65,7 @@ class Client:
         trial = self.api.get(f"/api/sessions/{self.session}/next").json()
         if trial.get("done"):
             return False
-        body = {"answers": answers_for(trial), "rt_ms": 1234.5}
+        body = {"answers": study_answers(trial), "rt_ms": 1234.5}
         sent = time.perf_counter_ns()
         reply = self.api.post(f"/api/sessions/{self.session}/trials/{trial['trial']}", json=body)
         self.latencies_ns.append(time.perf_counter_ns() - sent)

@@ -137,3 +137,42 @@ def stroke_messages(pen: str = "pencil", stroke: int = 1, modality: str = "audit
     for i, message in enumerate(messages):
         message["seq"] = seq0 + i
     return messages
+
+
+def study_answers(trial: dict) -> dict:
+    """A valid answer to every question of a study trial (as ``GET …/next`` gives it), varied
+    by the trial's number: a choice, a Likert point, a line of text."""
+    n, given = trial["trial"], {}
+    for question in trial["questions"]:
+        if question["type"] == "choice":
+            given[question["id"]] = question["choices"][n % len(question["choices"])]
+        elif question["type"] == "likert":
+            given[question["id"]] = 1 + n % question["points"]
+        else:
+            given[question["id"]] = f"trial {n}"
+    return given
+
+
+# A process that opens a store, leaves one stroke open with two samples, says "ready" and
+# waits (to be killed): argv[1] is the store's path or URL.
+CRASHER = """
+import sys
+from realpen.live.store import StrokeStore
+store = StrokeStore(sys.argv[1])
+sid = store.begin_stroke(session="s", page_stroke=1, pen="pencil", profile_version="0" * 12,
+                         modality="none", ink="visible", pointer_type="pen", px_per_mm=4.0,
+                         calibrated=False, page_t0=2.0)
+store.add_samples(sid, [(2.0, 0, 0, 0.5, 0, 0, 0), (3.5, 1, 0, 0.5, 0, 0, 0)])
+print("ready", flush=True)
+sys.stdin.read()
+"""
+
+# Debian's Chromium, headless, as the browser tests start it (without the background
+# networking this machine's closed network refuses).
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                 "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync",
+                 "--autoplay-policy=no-user-gesture-required"]
+CHROMIUM_MISSING = ("browser tests need Debian's chromium at /usr/bin/chromium (apt-get install "
+                    "chromium; scripts/test.sh installs it when run as root)")

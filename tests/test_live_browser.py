@@ -22,24 +22,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from live_support import low_rate_profile, serve
+from live_support import CHROMIUM, CHROMIUM_ARGS, CHROMIUM_MISSING, low_rate_profile, serve
 
 from realpen.profile import resolve_profile
 from realpen.sound.coupling import Coupling, one_pole
 from realpen.sound.stroke import Trajectory
 
-CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
-GESTURE_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-                "--no-first-run", "--disable-background-networking",
-                "--disable-component-update", "--disable-sync"]
-CHROMIUM_ARGS = GESTURE_ARGS + ["--autoplay-policy=no-user-gesture-required"]
+GESTURE_ARGS = [arg for arg in CHROMIUM_ARGS if not arg.startswith("--autoplay-policy")]
 LANDSCAPE = {"width": 1180, "height": 820}
 PORTRAIT = {"width": 820, "height": 1180}
 
 if not CHROMIUM.exists():
-    pytest.skip("browser tests need Debian's chromium at /usr/bin/chromium (apt-get install "
-                "chromium; scripts/test.sh installs it when run as root)", allow_module_level=True)
+    pytest.skip(CHROMIUM_MISSING, allow_module_level=True)
 sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
 httpx = pytest.importorskip("httpx")
 

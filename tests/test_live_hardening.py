@@ -19,7 +19,7 @@ import time
 import pytest
 import sqlalchemy.exc
 from conftest import run_cli, store_rows
-from live_support import LOCAL, WS, rows, talk
+from live_support import CRASHER, LOCAL, WS, rows, talk
 
 pytest.importorskip("fastapi", reason="the live app needs the server dependencies")
 
@@ -216,18 +216,6 @@ def test_a_write_whose_caller_stopped_waiting_is_still_made(store_target):
     assert store_rows(store_target, "SELECT end_reason FROM strokes") == [("disconnect",)]
 
 
-
-CRASHER = """
-import os, sys
-from realpen.live.store import StrokeStore
-store = StrokeStore(sys.argv[1])
-sid = store.begin_stroke(session="s", page_stroke=1, pen="pencil", profile_version="0" * 12,
-                         modality="none", ink="visible", pointer_type="pen", px_per_mm=4.0,
-                         calibrated=False, page_t0=2.0)
-store.add_samples(sid, [(2.0, 0, 0, 0.5, 0, 0, 0), (3.5, 1, 0, 0.5, 0, 0, 0)])
-print("ready", flush=True)
-sys.stdin.read()
-"""
 
 
 def test_a_killed_server_leaves_its_store_to_the_next_which_closes_its_strokes(tmp_path):

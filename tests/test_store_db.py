@@ -11,6 +11,7 @@ import threading
 
 import pytest
 from conftest import assert_clean_failure, run_cli, store_rows
+from live_support import CRASHER
 from sqlalchemy import Float, create_engine, insert, make_url, select, text
 from sqlalchemy.exc import DBAPIError, IntegrityError, OperationalError, ResourceClosedError
 from sqlalchemy.pool import NullPool
@@ -390,18 +391,6 @@ def test_a_lost_postgresql_connection_fails_its_batch_and_the_next_reconnects(po
 
 
 # ---- PostgreSQL: several servers, a crash ----------------------------------------------------
-
-CRASHER = """
-import sys
-from realpen.live.store import StrokeStore
-store = StrokeStore(sys.argv[1])
-sid = store.begin_stroke(session="s", page_stroke=1, pen="pencil", profile_version="0" * 12,
-                         modality="none", ink="visible", pointer_type="pen", px_per_mm=4.0,
-                         calibrated=False, page_t0=2.0)
-store.add_samples(sid, [(2.0, 0, 0, 0.5, 0, 0, 0), (3.5, 1, 0, 0.5, 0, 0, 0)])
-print("ready", flush=True)
-sys.stdin.read()
-"""
 
 
 def test_postgresql_strokes_of_a_killed_server_are_closed_but_not_a_live_one(postgres_server):

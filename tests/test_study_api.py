@@ -8,7 +8,7 @@ import sqlite3
 import numpy as np
 import pytest
 import soundfile
-from live_support import WS, talk
+from live_support import WS, study_answers, talk
 
 CONSENT = {"consent": True}
 
@@ -16,19 +16,6 @@ CONSENT = {"consent": True}
 def start(client, design="study1", participant="P01", **fields):
     return client.post("/api/sessions", json={"design": design, "participant": participant,
                                               **CONSENT, **fields})
-
-
-def answers_for(trial: dict, choice_index: int = 0) -> dict:
-    """Valid answers to every question of a trial (``choice_index`` picks among choices)."""
-    given = {}
-    for question in trial["questions"]:
-        if question["type"] == "likert":
-            given[question["id"]] = question["points"]
-        elif question["type"] == "choice":
-            given[question["id"]] = question["choices"][choice_index % len(question["choices"])]
-        else:
-            given[question["id"]] = "felt like paper"
-    return given
 
 
 def count(path, sql: str, *args):
@@ -111,7 +98,7 @@ def test_a_whole_study1_session_through_the_api(client, store_path):
         trial_kinds.append(trial["writing"])
         assert trial["feedback"] is False
         reply = client.post(f"/api/sessions/{session}/trials/{trial['trial']}",
-                            json={"answers": answers_for(trial), "rt_ms": 1500.0})
+                            json={"answers": study_answers(trial), "rt_ms": 1500.0})
         assert reply.status_code == 201, reply.text
     assert trial_kinds == [True] * 6 + [False]  # the comments are asked without writing
     conditions = [block for block, phase in seen if phase == "experimental"]
@@ -176,7 +163,7 @@ def test_each_condition_gets_its_own_pattern(client):
         if trial["phase"] == "experimental":
             patterns[trial["condition"]] = _pattern(client, session, n)
         client.post(f"/api/sessions/{session}/trials/{n}",
-                    json={"answers": answers_for(trial), "rt_ms": 10.0})
+                    json={"answers": study_answers(trial), "rt_ms": 10.0})
         n += 1
     assert sorted(patterns) == list("ABCDEF")
     rates = {rate for _, rate in patterns.values()}
@@ -309,7 +296,7 @@ def test_values_are_taken_as_sent_and_storable(client, store_path):
         assert client.get(f"/api/sessions/{session}/trials/{n}/tactile.wav").status_code == 422
     # an optional question left empty is stored as "" (its trial keeps its row)
     while (trial := client.get(f"/api/sessions/{session}/next").json()).get("trial"):
-        given = answers_for(trial)
+        given = study_answers(trial)
         if "comments" in given:
             given["comments"] = ""
             nul = client.post(f"/api/sessions/{session}/trials/{trial['trial']}",

@@ -18,13 +18,9 @@ import time
 from pathlib import Path
 
 import pytest
-from live_support import serve
+from live_support import CHROMIUM, CHROMIUM_ARGS, CHROMIUM_MISSING, serve
 
-CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--autoplay-policy=no-user-gesture-required"]
 LANDSCAPE = {"width": 1180, "height": 820}
 PORTRAIT = {"width": 820, "height": 1180}
 DESKTOP = {"width": 1280, "height": 900}
@@ -37,8 +33,7 @@ UNPROCESSABLE = REFUSED.format(422, "Unprocessable Entity")
 CONFLICT = REFUSED.format(409, "Conflict")
 
 if not CHROMIUM.exists():
-    pytest.skip("browser tests need Debian's chromium at /usr/bin/chromium (apt-get install "
-                "chromium; scripts/test.sh installs it when run as root)", allow_module_level=True)
+    pytest.skip(CHROMIUM_MISSING, allow_module_level=True)
 sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
 httpx = pytest.importorskip("httpx")
 

@@ -12,23 +12,11 @@ import threading
 import time
 
 import httpx
-from live_support import serve
+from live_support import serve, study_answers
 from sqlalchemy import create_engine, text
 
 PARTICIPANTS = ("P01", "P02")
 KILLS = (20, 70)  # the server is killed once the clients have this many answers acknowledged
-
-
-def _answer(trial: dict) -> dict:
-    given = {}
-    for question in trial["questions"]:
-        if question["type"] == "choice":
-            given[question["id"]] = question["choices"][trial["trial"] % len(question["choices"])]
-        elif question["type"] == "likert":
-            given[question["id"]] = 1 + trial["trial"] % question["points"]
-        else:
-            given[question["id"]] = f"trial {trial['trial']}"
-    return given
 
 
 class Participant:
@@ -58,7 +46,7 @@ class Participant:
                 trial = api.get(f"/api/sessions/{self.session}/next").json()
                 if trial.get("done"):
                     return
-                given = _answer(trial)
+                given = study_answers(trial)
                 self.pending = (trial["trial"], given)
                 reply = api.post(f"/api/sessions/{self.session}/trials/{trial['trial']}",
                                  json={"answers": given, "rt_ms": 500.0})

@@ -24,7 +24,7 @@ __all__ = ["MIN_RATE_HZ", "MAX_RATE_HZ", "MAX_CHANNELS", "MAX_FRAMES", "MAX_JSON
            "MAX_JSON_DEPTH", "MAX_NUMBER_CHARS", "MAX_CSV_FIELD_CHARS", "MAX_CSV_LINE_CHARS",
            "MAX_CSV_BYTES", "MAX_NPZ_DIRECTORY_BYTES", "MAX_NPZ_ARRAY_BYTES",
            "MAX_SAMPLE_MAGNITUDE", "MAX_XML_BYTES", "MAX_MODEL_ORDER",
-           "load_json", "json_depth", "check_size", "check_signal", "require_rate"]
+           "load_json", "json_depth", "count_values", "check_size", "check_signal", "require_rate"]
 
 MIN_RATE_HZ = 100
 """The lowest sampling rate (Hz) of a signal read or written: an accelerometer for a pen runs at
@@ -147,7 +147,7 @@ def load_json(source: bytes | str | os.PathLike, what: object | None = None):
         document = json.loads(text, parse_constant=_refuse_constant)
     except ValueError as error:  # JSONDecodeError, and NaN/Infinity refused above
         raise fail(name, f"is not valid JSON ({error})") from None
-    values = _count_values(document, MAX_JSON_VALUES)
+    values = count_values(document, MAX_JSON_VALUES)
     if values > MAX_JSON_VALUES:
         # Validating that many values (each a possible error) would take gigabytes.
         raise fail(name, f"holds more than {MAX_JSON_VALUES:,} values; the limit is "
@@ -160,14 +160,17 @@ def load_json(source: bytes | str | os.PathLike, what: object | None = None):
     return document
 
 
-def _count_values(document, limit: int) -> int:
+def count_values(document, limit: int, keys: bool = False) -> int:
     """How many values (objects, arrays, scalars) ``document`` holds, counting up to
-    ``limit + 1``."""
+    ``limit + 1`` (so a bomb costs no more than the limit); ``keys``: mapping keys count too
+    (YAML's may be values of any kind)."""
     count, stack = 0, [document]
     while stack and count <= limit:
         value = stack.pop()
         count += 1
         if isinstance(value, dict):
+            if keys:
+                stack.extend(value.keys())
             stack.extend(value.values())
         elif isinstance(value, list):
             stack.extend(value)

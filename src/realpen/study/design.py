@@ -880,15 +880,15 @@ def load_design(source: str | os.PathLike) -> Design:
     if not path.is_file():
         raise fail(path, "no such design file" if not path.exists() else "is not a file")
     if suffix == ".json":
-        from realpen.io.limits import load_json
+        from realpen.io.limits import check_size, load_json
 
-        if path.stat().st_size > MAX_DESIGN_BYTES:
-            raise fail(path, f"is {path.stat().st_size:,} bytes; design files are limited to "
-                             f"{MAX_DESIGN_BYTES:,}")
+        check_size(path, MAX_DESIGN_BYTES, "design files")
         document = load_json(path)
     else:
         document = _load_yaml(path)
-    if _count_values(document) > MAX_DESIGN_VALUES:
+    from realpen.io.limits import count_values
+
+    if count_values(document, MAX_DESIGN_VALUES, keys=True) > MAX_DESIGN_VALUES:
         raise fail(path, f"holds more than {MAX_DESIGN_VALUES:,} values (YAML aliases "
                          f"included); the limit is {MAX_DESIGN_VALUES:,}")
     return _validate(document, path)
@@ -897,11 +897,10 @@ def load_design(source: str | os.PathLike) -> Design:
 def _load_yaml(path: Path) -> Any:
     import yaml
 
+    from realpen.io.limits import check_size
+
+    check_size(path, MAX_DESIGN_BYTES, "design files")
     try:
-        size = path.stat().st_size
-        if size > MAX_DESIGN_BYTES:
-            raise fail(path, f"is {size:,} bytes; design files are limited to "
-                             f"{MAX_DESIGN_BYTES:,}")
         data = path.read_bytes()
     except OSError as error:
         raise fail(path, f"cannot read ({error.strerror or error})") from None
@@ -958,20 +957,6 @@ def _loader():
 
         _LOADER = DesignLoader
     return _LOADER
-
-
-def _count_values(document: Any, limit: int = MAX_DESIGN_VALUES) -> int:
-    """Values in ``document`` (aliases expanded), counting up to ``limit + 1``."""
-    count, stack = 0, [document]
-    while stack and count <= limit:
-        value = stack.pop()
-        count += 1
-        if isinstance(value, dict):
-            stack.extend(value.keys())
-            stack.extend(value.values())
-        elif isinstance(value, list):
-            stack.extend(value)
-    return count
 
 
 def design_schema() -> dict:
