@@ -176,3 +176,33 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
                  "--autoplay-policy=no-user-gesture-required"]
 CHROMIUM_MISSING = ("browser tests need Debian's chromium at /usr/bin/chromium (apt-get install "
                     "chromium; scripts/test.sh installs it when run as root)")
+
+# The stroke store's schemas before Alembic (versions 1 and 2), as those RealPens wrote them.
+LEGACY_V1 = """
+CREATE TABLE strokes (id INTEGER PRIMARY KEY AUTOINCREMENT, session TEXT NOT NULL,
+  page_stroke INTEGER NOT NULL, pen TEXT NOT NULL, profile_version TEXT NOT NULL,
+  modality TEXT NOT NULL, ink TEXT NOT NULL, pointer_type TEXT NOT NULL,
+  px_per_mm REAL NOT NULL, calibrated INTEGER NOT NULL, page_t0 REAL NOT NULL,
+  started_at TEXT NOT NULL, ended_at TEXT, end_reason TEXT,
+  sample_count INTEGER NOT NULL DEFAULT 0);
+CREATE TABLE samples (stroke_id INTEGER NOT NULL REFERENCES strokes(id),
+  seq INTEGER NOT NULL, t REAL NOT NULL, x REAL NOT NULL, y REAL NOT NULL,
+  pressure REAL NOT NULL, tilt_x REAL NOT NULL, tilt_y REAL NOT NULL,
+  speed REAL NOT NULL, PRIMARY KEY (stroke_id, seq)) WITHOUT ROWID;
+PRAGMA user_version = 1;
+"""
+LEGACY_V2 = """
+CREATE TABLE IF NOT EXISTS strokes (
+    id INTEGER PRIMARY KEY AUTOINCREMENT, session TEXT NOT NULL, page_stroke INTEGER NOT NULL,
+    pen TEXT NOT NULL, profile_version TEXT NOT NULL, modality TEXT NOT NULL, ink TEXT NOT NULL,
+    pointer_type TEXT NOT NULL, px_per_mm REAL NOT NULL, calibrated INTEGER NOT NULL,
+    page_t0 REAL NOT NULL, started_at TEXT NOT NULL, ended_at TEXT, end_reason TEXT,
+    sample_count INTEGER NOT NULL DEFAULT 0, page TEXT);
+CREATE TABLE IF NOT EXISTS samples (
+    stroke_id INTEGER NOT NULL REFERENCES strokes(id) ON DELETE CASCADE, seq INTEGER NOT NULL,
+    t REAL NOT NULL, x REAL NOT NULL, y REAL NOT NULL, pressure REAL NOT NULL,
+    tilt_x REAL NOT NULL, tilt_y REAL NOT NULL, speed REAL NOT NULL,
+    PRIMARY KEY (stroke_id, seq)) WITHOUT ROWID;
+CREATE UNIQUE INDEX IF NOT EXISTS strokes_by_page ON strokes (page, page_stroke);
+PRAGMA user_version = 2;
+"""

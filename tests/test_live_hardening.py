@@ -19,7 +19,7 @@ import time
 import pytest
 import sqlalchemy.exc
 from conftest import run_cli, store_rows
-from live_support import CRASHER, LOCAL, WS, rows, talk
+from live_support import CRASHER, LEGACY_V1, LOCAL, WS, rows, talk
 
 pytest.importorskip("fastapi", reason="the live app needs the server dependencies")
 
@@ -277,24 +277,13 @@ def test_the_journal_is_checkpointed_and_truncated_while_pages_write(tmp_path):
 def test_a_version_1_store_is_upgraded_in_place(tmp_path):
     path = tmp_path / "old.sqlite3"
     with sqlite3.connect(path) as db:
-        db.executescript("""
-            CREATE TABLE strokes (id INTEGER PRIMARY KEY AUTOINCREMENT, session TEXT NOT NULL,
-              page_stroke INTEGER NOT NULL, pen TEXT NOT NULL, profile_version TEXT NOT NULL,
-              modality TEXT NOT NULL, ink TEXT NOT NULL, pointer_type TEXT NOT NULL,
-              px_per_mm REAL NOT NULL, calibrated INTEGER NOT NULL, page_t0 REAL NOT NULL,
-              started_at TEXT NOT NULL, ended_at TEXT, end_reason TEXT,
-              sample_count INTEGER NOT NULL DEFAULT 0);
-            CREATE TABLE samples (stroke_id INTEGER NOT NULL REFERENCES strokes(id),
-              seq INTEGER NOT NULL, t REAL NOT NULL, x REAL NOT NULL, y REAL NOT NULL,
-              pressure REAL NOT NULL, tilt_x REAL NOT NULL, tilt_y REAL NOT NULL,
-              speed REAL NOT NULL, PRIMARY KEY (stroke_id, seq)) WITHOUT ROWID;
+        db.executescript(LEGACY_V1 + """
             INSERT INTO strokes VALUES (1, 'abc', 1, 'pencil', '000000000000', 'none', 'visible',
               'pen', 4.0, 0, 0.0, '2026-01-01T00:00:00.000+00:00', '2026-01-01T00:00:01.000+00:00',
               'pen_up', 0);
             INSERT INTO strokes VALUES (2, 'abc', 1, 'pencil', '000000000000', 'none', 'visible',
               'pen', 4.0, 0, 0.0, '2026-01-01T00:00:02.000+00:00', '2026-01-01T00:00:03.000+00:00',
               'pen_up', 0);
-            PRAGMA user_version = 1;
         """)
     store = StrokeStore(path)
     assert store.begin_stroke(session="abc", page_stroke=1, page_t0=0.0, **STROKE_FIELDS) == 1

@@ -11,7 +11,7 @@ import threading
 
 import pytest
 from conftest import assert_clean_failure, run_cli, store_rows
-from live_support import CRASHER
+from live_support import CRASHER, LEGACY_V1, LEGACY_V2
 from sqlalchemy import Float, create_engine, insert, make_url, select, text
 from sqlalchemy.exc import DBAPIError, IntegrityError, OperationalError, ResourceClosedError
 from sqlalchemy.pool import NullPool
@@ -108,37 +108,6 @@ def test_strokes_carry_their_study_trial(store_target):
         store.close()
     assert store_rows(store_target, "SELECT page_stroke, study_session, trial FROM strokes "
                                     "ORDER BY id") == [(1, None, None), (2, session, 3)]
-
-
-LEGACY_V1 = """
-CREATE TABLE strokes (id INTEGER PRIMARY KEY AUTOINCREMENT, session TEXT NOT NULL,
-  page_stroke INTEGER NOT NULL, pen TEXT NOT NULL, profile_version TEXT NOT NULL,
-  modality TEXT NOT NULL, ink TEXT NOT NULL, pointer_type TEXT NOT NULL,
-  px_per_mm REAL NOT NULL, calibrated INTEGER NOT NULL, page_t0 REAL NOT NULL,
-  started_at TEXT NOT NULL, ended_at TEXT, end_reason TEXT,
-  sample_count INTEGER NOT NULL DEFAULT 0);
-CREATE TABLE samples (stroke_id INTEGER NOT NULL REFERENCES strokes(id),
-  seq INTEGER NOT NULL, t REAL NOT NULL, x REAL NOT NULL, y REAL NOT NULL,
-  pressure REAL NOT NULL, tilt_x REAL NOT NULL, tilt_y REAL NOT NULL,
-  speed REAL NOT NULL, PRIMARY KEY (stroke_id, seq)) WITHOUT ROWID;
-PRAGMA user_version = 1;
-"""
-# The schema of the stroke store's version 2, as the store before Alembic wrote it.
-LEGACY_V2 = """
-CREATE TABLE IF NOT EXISTS strokes (
-    id INTEGER PRIMARY KEY AUTOINCREMENT, session TEXT NOT NULL, page_stroke INTEGER NOT NULL,
-    pen TEXT NOT NULL, profile_version TEXT NOT NULL, modality TEXT NOT NULL, ink TEXT NOT NULL,
-    pointer_type TEXT NOT NULL, px_per_mm REAL NOT NULL, calibrated INTEGER NOT NULL,
-    page_t0 REAL NOT NULL, started_at TEXT NOT NULL, ended_at TEXT, end_reason TEXT,
-    sample_count INTEGER NOT NULL DEFAULT 0, page TEXT);
-CREATE TABLE IF NOT EXISTS samples (
-    stroke_id INTEGER NOT NULL REFERENCES strokes(id) ON DELETE CASCADE, seq INTEGER NOT NULL,
-    t REAL NOT NULL, x REAL NOT NULL, y REAL NOT NULL, pressure REAL NOT NULL,
-    tilt_x REAL NOT NULL, tilt_y REAL NOT NULL, speed REAL NOT NULL,
-    PRIMARY KEY (stroke_id, seq)) WITHOUT ROWID;
-CREATE UNIQUE INDEX IF NOT EXISTS strokes_by_page ON strokes (page, page_stroke);
-PRAGMA user_version = 2;
-"""
 
 
 @pytest.mark.parametrize("version", [1, 2])

@@ -183,7 +183,7 @@ def add_study_routes(app: FastAPI, state: Any, designs: dict[str, Design], stati
         if missing:
             return JSONResponse({"detail": f"design: '{design.name}' plays the pen profile "
                                            f"'{missing[0]}', which this server does not offer "
-                                           f"(give its folder to serve --profiles)"}, 422)
+                                           f"(start the server with the folder that holds it)"}, 422)
         try:
             request = study.SessionRequest(body.participant, body.site, dict(body.demographics),
                                            body.consent, body.index, body.seed)

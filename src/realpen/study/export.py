@@ -475,7 +475,7 @@ def _strokes_sidecar(store: Database, studies: list[Any], exported_at: str, stro
                    "Units": "degrees"},
         "speed": {"Description": "Pen speed as the page measured it (over 20 ms).",
                   "Units": "mm/s"},
-        **_provenance(store, studies, exported_at, "realpen study export --strokes"),
+        **_provenance(store, studies, exported_at, "realpen study export, strokes file"),
         "Strokes": strokes,
         "Rows": samples,
     }
