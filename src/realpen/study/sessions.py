@@ -139,15 +139,13 @@ class DesignCache:
 def design_summary(design: Design) -> dict:
     """What the operator console shows of a design: name, title, description, the recommended
     number of participants, the plan seed, and the participant fields it asks for."""
-    fields = getattr(design, "participant_fields", None)
-    asked = fields.model_dump(mode="json") if hasattr(fields, "model_dump") else (fields or {})
-    return {"name": design.name, "title": getattr(design, "title", ""),
-            "description": getattr(design, "description", ""),
-            "participants": getattr(design, "participants", None), "seed": design.seed,
-            "version": design.version, "participant_fields": asked}
+    return {"name": design.name, "title": design.title, "description": design.description,
+            "participants": design.participants, "seed": design.seed,
+            "version": design.version,
+            "participant_fields": design.participant_fields.model_dump(mode="json")}
 
 
-def _study_id(conn: Connection, design: Design, cache: DesignCache) -> int:
+def _study_id(conn: Connection, design: Design) -> int:
     """The id of the study row for this design (its name and content), made if new."""
     query = select(studies.c.id).where(studies.c.name == design.name,
                                        studies.c.version == design.version)
@@ -156,7 +154,6 @@ def _study_id(conn: Connection, design: Design, cache: DesignCache) -> int:
         study_id = conn.execute(insert(studies).values(
             name=design.name, version=design.version, design=design.to_json(),
             created_at=now()).returning(studies.c.id)).scalar_one()
-        cache._by_study[study_id] = design
     return study_id
 
 
@@ -166,14 +163,10 @@ def _design_key(name: str) -> int:
     return int.from_bytes(digest[:8], "big", signed=True)
 
 
-def _free_index(conn: Connection, study_names: str) -> int:
-    """The lowest plan row no session of a design (any version of it) uses yet."""
-    used = set(conn.execute(select(sessions.c.plan_index).join(studies).where(
-        studies.c.name == study_names)).scalars())
-    index = 0
-    while index in used:
-        index += 1
-    return index
+def _used_rows(conn: Connection, name: str) -> set[int]:
+    """The plan rows the sessions of a design (any version of it) use."""
+    return set(conn.execute(select(sessions.c.plan_index).join(studies).where(
+        studies.c.name == name)).scalars())
 
 
 def _existing_session(conn: Connection, name: str, code: str) -> int | None:
@@ -181,11 +174,6 @@ def _existing_session(conn: Connection, name: str, code: str) -> int | None:
         select(sessions.c.id).join(participants, sessions.c.participant_id == participants.c.id)
         .join(studies, sessions.c.study_id == studies.c.id)
         .where(studies.c.name == name, participants.c.code == code)).scalar()
-
-
-def _requires_consent(design: Design) -> bool:
-    fields = getattr(design, "participant_fields", None)
-    return bool(getattr(fields, "consent", None))
 
 
 def open_session(conn: Connection, design: Design, request: SessionRequest,
@@ -210,16 +198,16 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
     existing = _existing_session(conn, design.name, code)
     if existing is not None:
         return progress(conn, existing, cache), False
-    if _requires_consent(design) and request.consent is not True:
+    if design.participant_fields.consent and request.consent is not True:
         raise StudyError(422, f"consent: the design '{design.name}' asks for the participant's "
                               f"consent before the session starts")
-    study_id = _study_id(conn, design, cache)
+    study_id = _study_id(conn, design)
+    used = _used_rows(conn, design.name)
     if request.index is None:
-        index = _free_index(conn, design.name)
+        index = next(row for row in range(len(used) + 1) if row not in used)  # the lowest free
     else:
         index = request.index
-        if index in set(conn.execute(select(sessions.c.plan_index).join(studies).where(
-                studies.c.name == design.name)).scalars()):
+        if index in used:
             raise StudyError(422, f"index: plan row {index} is used by another session of "
                                   f"'{design.name}'")
     seed = design.seed if request.seed is None else request.seed
@@ -257,7 +245,7 @@ def _first_unanswered(conn: Connection, session_id: int) -> int | None:
 def _progress_of(row, blocks: list, design: Design, next_n: int | None) -> dict:
     total = sum(block["trials"] for block in blocks)
     answered = sum(block["answered"] for block in blocks)
-    return {"session": row["id"], "design": row["design"], "title": getattr(design, "title", ""),
+    return {"session": row["id"], "design": row["design"], "title": design.title,
             "participant": row["code"], "site": row["site"], "index": row["plan_index"],
             "seed": row["seed"], "state": row["state"], "trials": total, "answered": answered,
             "next": None if row["state"] == "finished" else next_n,
@@ -349,10 +337,10 @@ def pen_profile(design: Design, pen: str) -> str:
 def _question_json(design: Design, question_id: str) -> dict:
     question = design.question(question_id)
     data = {"id": question.id, "type": question.type, "text": question.text,
-            "required": bool(getattr(question, "required", True))}
+            "required": question.required}
     if question.type == "likert":
         data["points"] = question.points
-        data["anchors"] = {str(point): label for point, label in (question.anchors or {}).items()}
+        data["anchors"] = {str(point): label for point, label in question.anchors.items()}
     elif question.type == "choice":
         data["choices"] = list(question.choices)
     return data
@@ -405,7 +393,7 @@ def _check_answers(design: Design, plan: PlannedTrial, given: dict) -> list[tupl
     for question_id in plan.questions:
         question = design.question(question_id)
         if question_id not in given or given[question_id] is None:
-            if getattr(question, "required", True):
+            if question.required:
                 raise StudyError(422, f"{question_id}: an answer is required")
             # Every question asked gets its row: an optional one left unanswered is "", so the
             # export keeps the trial (its time, its rt) even when nothing else was answered.
