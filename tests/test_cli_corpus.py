@@ -379,6 +379,7 @@ CORPUS = [
         "-o out.wav", "folder"),
     bad("export-output-folder", "export pencil -f hjif -o folder --force", "folder"),
     bad("serve-store-folder", "serve --port 0 --store folder", "folder"),
+    bad("serve-new-token-without-lan", "serve --port 0 --new-token", "--new-token"),
     # studies
     bad("study-plan-unknown-design", "study plan study9 -n 12", "study9"),
     bad("study-plan-missing-design", "study plan none.yaml -n 12", "none.yaml"),

@@ -450,6 +450,10 @@ def test_lan_token_is_required_on_http_and_websocket(tmp_path):
 
     with serve(tmp_path, "--lan", "--host", "127.0.0.1") as server:
         assert server.token and len(server.token) >= 20
+        # kept in the data folder, readable by its owner only: a restarted server keeps it
+        kept = tmp_path / "home" / "lan-token"
+        assert kept.read_text().strip() == server.token
+        assert kept.stat().st_mode & 0o777 == 0o600
         base = server.base
         for path in ("", "static/app.js", "api/config", "api/profiles",
                      "api/profiles/pencil/sound.wav", "api/device/log"):
@@ -576,3 +580,20 @@ def test_serve_prints_url_and_tactile_setting(tmp_path):
         assert config["tactile"] == "audio"
         output = server.stop()
     assert "tactile: audio, right channel" in output and "pens: pencil, ballpoint, marker" in output
+
+
+def test_the_lan_token_is_kept_until_a_new_one_is_asked_for(tmp_path):
+    from realpen.errors import RealPenError
+    from realpen.live.auth import kept_token
+
+    path = tmp_path / "home" / "lan-token"
+    first = kept_token(path)
+    assert kept_token(path) == first and path.stat().st_mode & 0o777 == 0o600
+    renewed = kept_token(path, renew=True)
+    assert renewed != first and kept_token(path) == renewed
+    path.write_text("not a token!\n")  # damaged: a new one replaces it
+    assert kept_token(path) not in ("not a token!", renewed)
+    (tmp_path / "file").write_text("")
+    with pytest.raises(RealPenError, match="cannot keep the LAN token"):
+        kept_token(tmp_path / "file" / "lan-token")
+    assert [p.name for p in path.parent.iterdir()] == ["lan-token"]  # no temporary files left

@@ -14,6 +14,7 @@ from realpen.errors import RealPenError, require_choice
 from realpen.io.paths import default_store
 
 TACTILE_CHOICES = ("audio", "none")
+LAN_TOKEN_FILE = "lan-token"  # in the data folder: the LAN token a restarted server keeps
 STORE_HELP = ("The store: an SQLite file (default: strokes.sqlite3 in the data folder) or a "
               "PostgreSQL URL, postgresql://USER:PASSWORD@HOST/DATABASE.")
 
@@ -47,23 +48,30 @@ def serve(
              "for an actuator on an amplifier | none: touch only on the pen's own device."),
     lan: bool = typer.Option(
         False, "--lan", help="Listen on all interfaces for a tablet on the same network; every "
-                             "request then needs the random token in the printed URL."),
+                             "request then needs the random token in the printed URL (kept in "
+                             "the data folder, so a restarted server has the same)."),
+    renew_token: bool = typer.Option(
+        False, "--new-token", help="With --lan: make a new token (tablets must open the new "
+                                   "URL)."),
     designs: list[Path] = typer.Option(
         [], "--design", help="A study design file (YAML or JSON) to offer beside study1 and "
                              "study2 (repeatable)."),
 ) -> None:
     """Start the live app: open the printed URL, pick a pen, and write (studies: /study)."""
+    from realpen.io.paths import data_dir
     from realpen.live.app import LiveSettings, create_app
-    from realpen.live.auth import LOOPBACK_HOSTS, new_token
+    from realpen.live.auth import LOOPBACK_HOSTS, kept_token
     from realpen.live.server import bind, lan_address, run, url_host
 
     require_choice("tactile", tactile, TACTILE_CHOICES)
+    if renew_token and not lan:
+        raise RealPenError("--new-token: only with --lan (without it no token is used)")
     host = host or ("0.0.0.0" if lan else "127.0.0.1")
     if not lan and not _is_loopback(host):
         raise RealPenError(f"--host {host}: other machines could reach it; add --lan (every "
                            f"request then needs a random token)")
     store = default_store() if store is None else store
-    token = new_token() if lan else None
+    token = kept_token(data_dir() / LAN_TOKEN_FILE, renew=renew_token) if lan else None
     settings = LiveSettings(store=store, profiles=list(profiles), tactile=tactile, token=token,
                             allowed_hosts=None if lan else LOOPBACK_HOSTS, designs=list(designs))
     # The port first: a port in use is refused before the profiles load and the store opens.

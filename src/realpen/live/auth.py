@@ -21,13 +21,18 @@ styles and connections and no framing, ``X-Frame-Options: DENY``, ``nosniff`` an
 
 from __future__ import annotations
 
+import os
 import re
 import secrets
+import tempfile
 from collections.abc import Collection
+from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
 from starlette.datastructures import Headers
 from starlette.responses import PlainTextResponse
+
+from realpen.errors import fail
 
 COOKIE = "realpen_token"
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
@@ -35,6 +40,7 @@ CONTENT_SECURITY_POLICY = (
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
     "media-src 'self' blob:; connect-src 'self'; font-src 'self'; manifest-src 'self'; "
     "base-uri 'none'; form-action 'self'; frame-ancestors 'none'")
+_TOKEN = re.compile(r"[A-Za-z0-9_-]{20,200}")  # what new_token makes (and a little more)
 _SAFE_HOST = re.compile(r"[A-Za-z0-9.:\[\]-]{1,260}")
 SECURITY_HEADERS = (
     (b"x-frame-options", b"DENY"),
@@ -50,6 +56,36 @@ ALLOWED_FETCH_SITES = ("same-origin", "none")  # "none": typed, bookmarked, open
 def new_token() -> str:
     """A random URL-safe token (128 bits)."""
     return secrets.token_urlsafe(16)
+
+
+def kept_token(path: Path, renew: bool = False) -> str:
+    """The LAN token kept in ``path`` (readable by its owner only), made when there is none or
+    ``renew``: a server started again keeps its token, so tablets that hold its URL (or its
+    cookie) carry on, a study's participant screen included.
+
+    Raises:
+        RealPenError: the file cannot be read or written (one line naming it).
+    """
+    try:
+        if not renew and path.is_file():
+            token = path.read_text(encoding="ascii").strip()
+            if _TOKEN.fullmatch(token):
+                return token
+        token = new_token()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # mkstemp makes the file 0600, and it keeps that mode when renamed into place.
+        descriptor, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        try:
+            with os.fdopen(descriptor, "w", encoding="ascii") as handle:
+                handle.write(token + "\n")
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        return token
+    except (OSError, UnicodeDecodeError) as error:
+        reason = getattr(error, "strerror", None) or error
+        raise fail(path, f"cannot keep the LAN token here ({reason})") from None
 
 
 def _hostname(host_header: str) -> str:
