@@ -545,7 +545,7 @@ def test_a_reload_and_lost_replies_resume_where_the_server_says(server, browsers
     assert set(tablet.problems) <= {NETWORK_FAILURE, CONFLICT}  # only what the test made
 
 
-# ---- 4. the server killed (SIGKILL) and started again while the participant answers ------------
+# ---- 4. the server (LAN mode) killed and started again while the participant answers --------
 
 def test_the_participant_screen_goes_on_across_a_server_restart(browser, browsers, tmp_path):
     import socket
@@ -554,14 +554,16 @@ def test_the_participant_screen_goes_on_across_a_server_restart(browser, browser
         probe.bind(("127.0.0.1", 0))
         port = str(probe.getsockname()[1])
     tablet = browsers()
-    with serve(tmp_path, "--port", port) as first:
+    lan = ("--lan", "--host", "127.0.0.1", "--port", port)  # a tablet's server: with its token
+    with serve(tmp_path, *lan) as first:
         first.store = tmp_path / "strokes.sqlite3"
-        with httpx.Client(timeout=10) as client:
+        bearer = {"Authorization": f"Bearer {first.token}"}
+        with httpx.Client(timeout=10, headers=bearer) as client:
             first.client = client
             session = api(first, "POST", "/api/sessions", {"design": "study1", "participant": "P09",
                                                            "consent": True}).json()["session"]
         page = tablet.context.new_page()
-        page.goto(f"{first.base}study/participant?session={session}")
+        page.goto(participant_url(first, session))
         screen = Participant(page)
         screen.start()
         for n in (1, 2):
@@ -577,11 +579,12 @@ def test_the_participant_screen_goes_on_across_a_server_restart(browser, browser
             page.click("#next")
         screen.wait("() => realpen.study.reconnecting === true")
         assert page.locator("#reconnecting").is_visible()
-        with serve(tmp_path, "--port", port) as second:  # same port, same store
+        with serve(tmp_path, *lan) as second:  # same port, same store, same data folder
             second.store = first.store
+            assert second.token == first.token  # the LAN token is kept: the tablet carries on
             screen.trial(3)  # the answer got through to the new server; the session goes on
             assert not page.locator("#reconnecting").is_visible()
-            with httpx.Client(timeout=10) as client:
+            with httpx.Client(timeout=10, headers=bearer) as client:
                 second.client = client
                 progress = api(second, "GET", f"/api/sessions/{session}").json()
     assert (progress["answered"], progress["next"]) == (2, 3)
