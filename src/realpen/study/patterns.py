@@ -15,7 +15,6 @@ import threading
 
 from realpen.errors import RealPenError
 from realpen.profile.bundle import PenProfile
-from realpen.tactile.build import build_pattern
 from realpen.tactile.pattern import TactilePattern, canonical_json
 
 __all__ = ["COUNT_FIELDS", "source_recording", "condition_pattern", "PatternCache"]
@@ -61,6 +60,10 @@ def condition_pattern(profile: PenProfile, tactile: dict) -> TactilePattern:
         RealPenError: the profile cannot be rebuilt (see :func:`source_recording`), or the
             parameters are refused (a ``ParameterError`` naming the parameter).
     """
+    # imported here: the analysis (scipy.signal) is loaded when a condition is first built,
+    # not when the server starts
+    from realpen.tactile.build import build_pattern
+
     base = {name: value for name, value in profile.meta.provenance.tactile_parameters.items()
             if name not in COUNT_FIELDS}
     return build_pattern(source_recording(profile), profile.actuator, None, None,
