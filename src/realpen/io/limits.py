@@ -24,7 +24,8 @@ __all__ = ["MIN_RATE_HZ", "MAX_RATE_HZ", "MAX_CHANNELS", "MAX_FRAMES", "MAX_JSON
            "MAX_JSON_DEPTH", "MAX_NUMBER_CHARS", "MAX_CSV_FIELD_CHARS", "MAX_CSV_LINE_CHARS",
            "MAX_CSV_BYTES", "MAX_NPZ_DIRECTORY_BYTES", "MAX_NPZ_ARRAY_BYTES",
            "MAX_SAMPLE_MAGNITUDE", "MAX_XML_BYTES", "MAX_MODEL_ORDER",
-           "load_json", "json_depth", "count_values", "check_size", "check_signal", "require_rate"]
+           "load_json", "json_depth", "count_values", "read_bounded", "check_size", "check_signal",
+           "require_rate"]
 
 MIN_RATE_HZ = 100
 """The lowest sampling rate (Hz) of a signal read or written: an accelerometer for a pen runs at
@@ -122,14 +123,7 @@ def load_json(source: bytes | str | os.PathLike, what: object | None = None):
     else:
         path = Path(source)
         name = what or path
-        try:
-            size = path.stat().st_size
-            if size > MAX_JSON_BYTES:
-                raise fail(name, f"is {size:,} bytes; JSON documents are limited to "
-                                 f"{MAX_JSON_BYTES:,}")
-            data = path.read_bytes()
-        except OSError as error:
-            raise fail(name, f"cannot read ({error.strerror or error})") from None
+        data = read_bounded(path, MAX_JSON_BYTES, "JSON documents", name)
     if len(data) > MAX_JSON_BYTES:
         raise fail(name, f"is {len(data):,} bytes; JSON documents are limited to "
                          f"{MAX_JSON_BYTES:,}")
@@ -175,6 +169,33 @@ def count_values(document, limit: int, keys: bool = False) -> int:
         elif isinstance(value, list):
             stack.extend(value)
     return count
+
+
+def read_bounded(path: str | os.PathLike, limit: int, kind: str, name: object = None) -> bytes:
+    """The bytes of the file at ``path``, refused when over ``limit`` bytes (by its size before
+    reading, and by what was read: a file may grow meanwhile).
+
+    Args:
+        path: the file.
+        limit: the most bytes accepted.
+        kind: what the file is, for the message (``"design files"``).
+        name: how messages name the file (default: ``path``).
+
+    Raises:
+        RealPenError: ``"<name>: is N bytes; <kind> are limited to <limit>"``, or a file that
+            cannot be read.
+    """
+    name = path if name is None else name
+    try:
+        size = Path(path).stat().st_size
+        if size > limit:
+            raise fail(name, f"is {size:,} bytes; {kind} are limited to {limit:,}")
+        data = Path(path).read_bytes()
+    except OSError as error:
+        raise fail(name, f"cannot read ({error.strerror or error})") from None
+    if len(data) > limit:
+        raise fail(name, f"is {len(data):,} bytes; {kind} are limited to {limit:,}")
+    return data
 
 
 def check_size(path: str | os.PathLike, limit: int, kind: str) -> int:

@@ -400,6 +400,16 @@ class TrialSettings(BaseModel):
     tactile: dict | None
 
 
+def _by_id(items: list, id: str, kind: str):
+    """The item of ``items`` whose ``id`` is ``id``; a :class:`ParameterError` naming ``kind``
+    and the ids there are otherwise."""
+    for item in items:
+        if item.id == id:
+            return item
+    raise ParameterError(kind, f"unknown {kind} {id!r} (the design's {kind}s: "
+                               f"{', '.join(item.id for item in items) or 'none'})")
+
+
 class Design(_Strict):
     """A study design; see the module doc for its fields. Read one with :func:`load_design`."""
 
@@ -472,11 +482,7 @@ class Design(_Strict):
         Raises:
             ParameterError: no such question.
         """
-        for question in self.questions:
-            if question.id == id:
-                return question
-        raise ParameterError("question", f"unknown question {id!r} (the design's questions: "
-                                         f"{', '.join(q.id for q in self.questions)})")
+        return _by_id(self.questions, id, "question")
 
     def pen(self, id: str) -> Pen:
         """The pen ``id`` (its ``profile_ref`` is the profile to load).
@@ -484,11 +490,7 @@ class Design(_Strict):
         Raises:
             ParameterError: no such pen.
         """
-        for pen in self.pens:
-            if pen.id == id:
-                return pen
-        raise ParameterError("pen", f"unknown pen {id!r} (the design's pens: "
-                                    f"{', '.join(p.id for p in self.pens)})")
+        return _by_id(self.pens, id, "pen")
 
     def condition(self, id: str) -> Condition:
         """The condition ``id``.
@@ -496,10 +498,7 @@ class Design(_Strict):
         Raises:
             ParameterError: no such condition.
         """
-        for condition in self.conditions:
-            if condition.id == id:
-                return condition
-        raise ParameterError("condition", f"unknown condition {id!r}")
+        return _by_id(self.conditions, id, "condition")
 
     # -- structure (what plans are made of) ----------------------------------------------------
 
@@ -897,16 +896,9 @@ def load_design(source: str | os.PathLike) -> Design:
 def _load_yaml(path: Path) -> Any:
     import yaml
 
-    from realpen.io.limits import check_size
+    from realpen.io.limits import read_bounded
 
-    check_size(path, MAX_DESIGN_BYTES, "design files")
-    try:
-        data = path.read_bytes()
-    except OSError as error:
-        raise fail(path, f"cannot read ({error.strerror or error})") from None
-    if len(data) > MAX_DESIGN_BYTES:
-        raise fail(path, f"is {len(data):,} bytes; design files are limited to "
-                         f"{MAX_DESIGN_BYTES:,}")
+    data = read_bounded(path, MAX_DESIGN_BYTES, "design files")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:

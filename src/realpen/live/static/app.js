@@ -21,7 +21,7 @@ import { CSS_PX_PER_MM, MOUSE_PRESSURE, SPEED_WINDOW_MS } from './pen.js';
 import { AudioEngine, startOnActivation } from './audio.js';
 import { Ink, inkStyle } from './ink.js';
 import { Link } from './link.js';
-import { Writer } from './writer.js';
+import { Writer, liveState } from './writer.js';
 
 const MODALITIES = ['tactile', 'auditory', 'auditory-tactile', 'none'];
 const INKS = ['visible', 'hidden'];
@@ -62,35 +62,14 @@ const pick = (value, allowed, fallback) => (allowed.includes(value) ? value : fa
 const describe = (error) => String((error && error.message && error.name)
   ? `${error.name}: ${error.message}` : error);
 
-const state = {
-  ready: false,
-  error: null,
+const state = liveState({
   notice: null,
-  config: null,
-  profiles: [],
-  pen: null,
-  profileVersion: null,
-  coupling: null,
   modality: pick(query.get('modality'), MODALITIES, pick(saved.get('modality'), MODALITIES, 'auditory-tactile')),
   ink: pick(query.get('ink'), INKS, pick(saved.get('ink'), INKS, 'visible')),
-  tactileAudio: false,
   pxPerMm: saved.get('pxPerMm', CSS_PX_PER_MM),
   calibrated: saved.get('pxPerMm', null) !== null,
-  down: false,
-  stroke: 0,
-  strokes: 0,
-  pointerType: null,
-  pressure: 0,
-  speed: 0,
-  tiltX: 0,
-  tiltY: 0,
-  targetGain: 0,
-  smoothedGain: 0,
-  tactileTarget: 0,
-  playbackRate: 1,
-  trace: [],
   model: { gainRaw, playbackRate, alpha, onePole, MOUSE_PRESSURE, SPEED_WINDOW_MS, CSS_PX_PER_MM },
-};
+});
 window.realpen = state;
 
 const audio = new AudioEngine();

@@ -9,11 +9,46 @@
 // smoothedGain, tactileTarget, playbackRate, trace).
 
 import { gainRaw, playbackRate } from './coupling.js';
-import { PenTracker } from './pen.js';
+import { CSS_PX_PER_MM, PenTracker } from './pen.js';
 import { inkStyle } from './ink.js';
 
 export const TRACE_LIMIT = 20000;
 const POINTER_TYPES = ['pen', 'touch', 'mouse'];
+
+/**
+ * A page's live state (window.realpen): the fields the writer reads and writes, at their
+ * starting values, with the page's own `fields` over them.
+ */
+export function liveState(fields) {
+  return {
+    ready: false,
+    error: null,
+    config: null,
+    profiles: [],
+    pen: null,
+    profileVersion: null,
+    coupling: null,
+    modality: 'none',
+    ink: 'visible',
+    tactileAudio: false,
+    pxPerMm: CSS_PX_PER_MM,
+    calibrated: false,
+    down: false,
+    stroke: 0,
+    strokes: 0,
+    pointerType: null,
+    pressure: 0,
+    speed: 0,
+    tiltX: 0,
+    tiltY: 0,
+    targetGain: 0,
+    smoothedGain: 0,
+    tactileTarget: 0,
+    playbackRate: 1,
+    trace: [],
+    ...fields,
+  };
+}
 
 export const soundOn = (modality) => modality === 'auditory' || modality === 'auditory-tactile';
 export const tactileOn = (modality) => modality === 'tactile' || modality === 'auditory-tactile';

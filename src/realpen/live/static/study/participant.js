@@ -28,7 +28,7 @@ import { CSS_PX_PER_MM } from '../pen.js';
 import { AudioEngine, startOnActivation } from '../audio.js';
 import { Ink } from '../ink.js';
 import { Link } from '../link.js';
-import { Writer } from '../writer.js';
+import { Writer, liveState } from '../writer.js';
 import { bytes, call, forgetTokenInAddress, Refused, sleep, Unreachable, withToken } from './api.js';
 
 const PAUSED_POLL_MS = 1000;  // while paused: ask again every second
@@ -69,34 +69,11 @@ const study = {
   feedback: null,     // the last training feedback shown: { correct, answer }
 };
 
-const state = {
-  ready: false,
-  error: null,
-  config: null,
-  profiles: [],
-  pen: null,
-  profileVersion: null,
-  coupling: null,
-  modality: 'none',
-  ink: 'visible',
-  tactileAudio: false,
+const state = liveState({
   pxPerMm: calibrated ? savedPxPerMm : CSS_PX_PER_MM,
   calibrated,
-  down: false,
-  stroke: 0,
-  strokes: 0,
-  pointerType: null,
-  pressure: 0,
-  speed: 0,
-  tiltX: 0,
-  tiltY: 0,
-  targetGain: 0,
-  smoothedGain: 0,
-  tactileTarget: 0,
-  playbackRate: 1,
-  trace: [],
   study,
-};
+});
 window.realpen = state;
 
 const audio = new AudioEngine();
