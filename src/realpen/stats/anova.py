@@ -1,0 +1,528 @@
+"""Repeated-measures ANOVA and paired pairwise comparisons, long-format pandas in, tidy out.
+
+- :func:`rm_anova`: one to three within-subject factors; F, df and p from statsmodels'
+  ``AnovaRM``; generalised eta squared, Greenhouse–Geisser and Huynh–Feldt epsilon and Mauchly's
+  test from pingouin (``rm_anova``, ``epsilon``, ``sphericity``) for designs of up to two
+  factors, from the covariance of orthonormal contrasts for the three-way case pingouin lacks.
+- :func:`pairwise`: every pair of levels of one factor, paired t (pingouin) or Wilcoxon
+  signed-rank (:func:`realpen.stats.nonparametric.wilcoxon`), Bonferroni or Holm adjusted
+  (statsmodels ``multipletests``).
+
+Both take a long-format DataFrame with one row per subject × cell and refuse anything else with
+one line naming the subject and the cell (:class:`realpen.errors.ParameterError`).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+import pingouin as pg
+import scipy.linalg
+import scipy.stats
+from statsmodels.stats.anova import AnovaRM
+from statsmodels.stats.multitest import multipletests
+
+from realpen.errors import ParameterError, require_choice
+from realpen.stats.results import TEST_COLUMNS, tidy
+from realpen.stats.results import test_row as _result_row  # pytest would collect "test_row"
+
+__all__ = ["rm_anova", "rm_anova_table", "pairwise", "SPHERICITY_ALPHA", "ADJUSTMENTS"]
+
+SPHERICITY_ALPHA = 0.05
+"""Mauchly's test at this level sets the ``sphericity`` column (True: not rejected)."""
+ADJUSTMENTS = ("bonferroni", "holm", "none")
+"""The multiplicity adjustments :func:`pairwise` offers."""
+
+_MAX_FACTORS = 3
+_ZERO = 1e-24
+"""Sums of squares below this fraction of Σy² are rounding dust (~1e-31 Σy²), i.e. zero."""
+
+
+# --- shared checks (also used by realpen.stats.nonparametric) ---------------------------------
+
+def _shown_level(value: object) -> str:
+    """A level or subject for a message: strings quoted, numbers bare, numpy scalars unwrapped."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+def _cell_text(factors: Sequence[str], cell: object) -> str:
+    cell = cell if isinstance(cell, tuple) else (cell,)
+    return ", ".join(f"{factor}={_shown_level(level)}" for factor, level in zip(factors, cell))
+
+
+def _levels(column: pd.Series) -> list:
+    """The levels of a column in a fixed order: a Categorical's own order (observed ones only),
+    otherwise sorted (so the order never depends on which participant came first)."""
+    if isinstance(column.dtype, pd.CategoricalDtype):
+        present = set(column.dropna().unique())
+        return [level for level in column.cat.categories if level in present]
+    unique = list(pd.unique(column.dropna()))
+    try:
+        return sorted(unique)
+    except TypeError:
+        return sorted(unique, key=str)
+
+
+def _factor_list(within: str | Sequence[str], *, most: int = _MAX_FACTORS) -> list[str]:
+    factors = [within] if isinstance(within, str) else list(within) if within is not None else []
+    if not factors or not all(isinstance(factor, str) for factor in factors):
+        raise ParameterError("within", f"must be a column name or a list of 1 to {most}, got {within!r}")
+    if len(factors) > most:
+        raise ParameterError("within", f"at most {most} factors are supported, got {len(factors)}")
+    if len(set(factors)) != len(factors):
+        raise ParameterError("within", f"names a factor twice: {factors}")
+    return factors
+
+
+def _check_columns(data: object, *, dv: str, factors: Sequence[str], subject: str) -> None:
+    if not isinstance(data, pd.DataFrame):
+        raise ParameterError("data", f"must be a pandas DataFrame (long format), got {type(data).__name__}")
+    for parameter, names in (("dv", [dv]), ("subject", [subject]), ("within", factors)):
+        for name in names:
+            if name not in data.columns:
+                raise ParameterError(parameter, f"no column {name!r} in data (columns: "
+                                                f"{', '.join(map(str, data.columns))})")
+    if dv in factors or subject in factors or dv == subject:
+        raise ParameterError("within", f"dv, subject and within must be different columns, got dv={dv!r}, "
+                                       f"subject={subject!r}, within={list(factors)}")
+    values = data[dv]
+    if not (pd.api.types.is_numeric_dtype(values) or pd.api.types.is_bool_dtype(values)):
+        raise ParameterError("dv", f"column {dv!r} is not numeric (dtype {values.dtype})")
+    for name in (subject, *factors):
+        missing = data[name].isna()
+        if missing.any():
+            raise ParameterError("data", f"column {name!r} is empty in row {data.index[missing.argmax()]}")
+
+
+def _balanced_wide(data: pd.DataFrame, *, dv: str, within: Sequence[str], subject: str,
+                   min_levels: int = 2) -> pd.DataFrame:
+    """Subjects × cells (columns: a MultiIndex over ``within``, levels in :func:`_levels` order)
+    with exactly one finite value each; anything else is refused naming subject and cell."""
+    factors = list(within)
+    _check_columns(data, dv=dv, factors=factors, subject=subject)
+    levels = [_levels(data[factor]) for factor in factors]
+    for factor, found in zip(factors, levels):
+        if len(found) < min_levels:
+            raise ParameterError("within", f"factor {factor!r} has {len(found)} level(s) "
+                                           f"({', '.join(map(_shown_level, found))}); a test needs at "
+                                           f"least {min_levels}")
+    subjects = _levels(data[subject])
+    if len(subjects) < 2:
+        raise ParameterError("data", f"needs at least 2 subjects in {subject!r}, got {len(subjects)}")
+    values = data[dv].astype(float)
+    bad = ~np.isfinite(values.to_numpy())
+    if bad.any():
+        row = data.loc[bad].iloc[0]
+        raise ParameterError("data", f"{dv!r} is missing or not finite for subject "
+                                     f"{_shown_level(row[subject])} at "
+                                     f"{_cell_text(factors, tuple(row[factors]))}")
+    keys = [subject, *factors]
+    counts = data.groupby(keys, observed=True, sort=False).size()
+    if (counts > 1).any():
+        key = counts.index[int(np.argmax(counts.to_numpy() > 1))]
+        raise ParameterError("data", f"subject {_shown_level(key[0])} has {counts[key]} values at "
+                                     f"{_cell_text(factors, key[1:])} (one per subject and cell expected: "
+                                     f"average repetitions first)")
+    full = pd.MultiIndex.from_product([subjects, *levels], names=keys)
+    if len(counts) < len(full):
+        missing = full.difference(counts.index, sort=False)
+        key = missing[0]
+        raise ParameterError("data", f"subject {_shown_level(key[0])} has no value at "
+                                     f"{_cell_text(factors, key[1:])} (every subject needs every cell)")
+    long = pd.Series(values.to_numpy(), index=pd.MultiIndex.from_frame(data[keys]))
+    wide = long.unstack(factors)
+    if not isinstance(wide.columns, pd.MultiIndex):
+        wide.columns = pd.MultiIndex.from_arrays([wide.columns], names=factors)
+    columns = pd.MultiIndex.from_product(levels, names=factors)
+    return wide.reindex(index=subjects, columns=columns)
+
+
+def _safe_long(wide: pd.DataFrame) -> pd.DataFrame:
+    """``wide`` back to long format with plain column names (``s``, ``f0``.., ``y``) and string
+    level codes: statsmodels builds a formula from the names, so a factor named ``pen type`` or a
+    level ``audio-tactile`` must not reach it."""
+    factors = list(wide.columns.names)
+    frame = wide.copy()
+    frame.index = [f"s{i}" for i in range(len(frame))]
+    frame.columns = pd.MultiIndex.from_tuples(
+        [tuple(f"l{codes[j]:04d}" for j in range(len(factors)))
+         for codes in zip(*[wide.columns.codes[j] for j in range(len(factors))])],
+        names=[f"f{j}" for j in range(len(factors))])
+    long = frame.stack(list(range(len(factors)))).rename("y").reset_index()
+    return long.rename(columns={"level_0": "s"})
+
+
+def _effects(factors: Sequence[str]) -> list[tuple[int, ...]]:
+    """Every main effect and interaction as factor positions, main effects first."""
+    positions = range(len(factors))
+    return [combo for size in range(1, len(factors) + 1) for combo in itertools.combinations(positions, size)]
+
+
+def _effect_name(factors: Sequence[str], effect: tuple[int, ...]) -> str:
+    return ":".join(factors[j] for j in effect)
+
+
+def _anovarm_f(long: pd.DataFrame, n_factors: int) -> dict[tuple[int, ...], tuple[float, ...]]:
+    """statsmodels AnovaRM on a :func:`_safe_long` frame: ``{effect: (F, df1, df2, p)}``."""
+    codes = [f"f{j}" for j in range(n_factors)]
+    table = AnovaRM(long, depvar="y", subject="s", within=codes).fit().anova_table
+    out = {}
+    for effect in _effects(codes):
+        row = table.loc[_effect_name(codes, effect)]
+        out[effect] = tuple(float(row[column]) for column in ("F Value", "Num DF", "Den DF", "Pr > F"))
+    return out
+
+
+# --- sphericity and effect sizes ------------------------------------------------------------
+
+def _hf_from_gg(eps_gg: float, n: int, d: int) -> float:
+    """Huynh–Feldt epsilon from Greenhouse–Geisser's with Lecoutre's (1991) correction, capped at 1.
+
+    ``((N − g + 1)·d·ε − 2) / (d·(N − g − d·ε))`` with g = 1 group of N subjects (car, afex and
+    pingouin.epsilon coincide here: Lecoutre's correction only differs with between-subject groups).
+    """
+    if d <= 1:
+        return 1.0
+    return float(min((n * d * eps_gg - 2) / (d * (n - 1 - d * eps_gg)), 1.0))
+
+
+def _mauchly(cov: np.ndarray, df_resid: int, k: int) -> tuple[float, float]:
+    """Mauchly's W and p from the covariance of d orthonormal contrasts (R's ``mauchly.test``
+    with its second-order term, as pingouin.sphericity; ``k`` the number of cells of the effect)."""
+    d = cov.shape[0]
+    sign, logdet = np.linalg.slogdet(cov)
+    log_w = logdet - d * math.log(np.trace(cov) / d) if sign > 0 else -math.inf
+    f = 1 - (2 * d**2 + d + 2) / (6 * d * df_resid)
+    w2 = (d + 2) * (d - 1) * (d - 2) * (2 * d**3 + 6 * d**2 + 3 * k + 2) / (288 * (df_resid * d * f) ** 2)
+    chi2 = -df_resid * f * log_w
+    ddof = d * (d + 1) / 2 - 1
+    p1, p2 = scipy.stats.chi2.sf(chi2, ddof), scipy.stats.chi2.sf(chi2, ddof + 4)
+    return float(math.exp(log_w)), float(p1 + w2 * (p2 - p1))
+
+
+def _contrast_decomposition(wide: pd.DataFrame) -> dict[tuple[int, ...], dict[str, float]]:
+    """Per effect: sums of squares, Greenhouse–Geisser and Huynh–Feldt epsilon and Mauchly's test,
+    from orthonormal contrasts of the subjects × cells table.
+
+    The contrasts of an effect are the Kronecker product over factors of orthonormal Helmert
+    contrasts (scipy.linalg.helmert) for the factors in the effect and a normalised mean for the
+    others (as R's car/afex, SPSS and pingouin build an interaction's). With z = Y·C (subjects ×
+    d): SS_effect = n·|mean z|², SS_error = Σ|z − mean z|², S = cov(z), and
+    ε_GG = tr(S)² / (d·tr(S²)) (Greenhouse & Geisser 1959; Box 1954), ε_HF from ε_GG
+    (Huynh & Feldt 1976, with Lecoutre 1991), Mauchly (1940) from S. ``()`` holds the subjects'
+    sum of squares.
+    """
+    y = wide.to_numpy(dtype=float)
+    n = y.shape[0]
+    sizes = [len(level) for level in wide.columns.levels]
+    out: dict[tuple[int, ...], dict[str, float]] = {}
+    for effect in [(), *_effects(range(len(sizes)))]:
+        contrast = np.ones((1, 1))
+        for j, k in enumerate(sizes):
+            part = scipy.linalg.helmert(k).T if j in effect else np.full((k, 1), 1 / math.sqrt(k))
+            contrast = np.kron(contrast, part)
+        z = y @ contrast
+        mean = z.mean(axis=0)
+        deviations = z - mean
+        d = z.shape[1]
+        cells = int(np.prod([sizes[j] for j in effect])) if effect else 1
+        entry = {"ss": float(n * mean @ mean), "ss_error": float((deviations**2).sum())}
+        if effect:
+            cov = deviations.T @ deviations / (n - 1)
+            eps = 1.0 if d <= 1 else float(min(np.trace(cov) ** 2 / (d * np.trace(cov @ cov)), 1.0))
+            w, p = (math.nan, math.nan) if d <= 1 else _mauchly(cov, n - 1, cells)
+            entry.update(eps_gg=eps, eps_hf=_hf_from_gg(eps, n, d), mauchly_w=w, p_mauchly=p)
+        out[effect] = entry
+    return out
+
+
+def _pingouin_sphericity(long: pd.DataFrame, n_factors: int) -> dict[tuple[int, ...], dict[str, float]]:
+    """ges, ε_GG, Mauchly from pingouin.rm_anova and ε_HF from pingouin.epsilon (≤ 2 factors)."""
+    within = [f"f{j}" for j in range(n_factors)]
+    with warnings.catch_warnings(), np.errstate(divide="ignore", invalid="ignore"):
+        # pingouin 0.7 calls DataFrame.dropna(inplace=True), deprecated in pandas 3.1: its noise,
+        # not the user's business.
+        warnings.filterwarnings("ignore", message="The inplace keyword", category=DeprecationWarning)
+        table = pg.rm_anova(long, dv="y", within=within if n_factors > 1 else within[0], subject="s",
+                            correction=True, effsize="ng2")
+        hf = {effect: float(pg.epsilon(long, dv="y", subject="s", correction="hf",
+                                       within=[within[j] for j in effect] if len(effect) > 1
+                                       else within[effect[0]]))
+              for effect in _effects(within)}
+    table = table.set_index(table["Source"].astype(str).str.replace(" * ", ":", regex=False))
+    out = {}
+    for effect in _effects(range(n_factors)):
+        name = ":".join(within[j] for j in effect)
+        row = table.loc[name]
+        # pingouin drops all-NaN columns (data without variation), hence .get.
+        out[effect] = {"ges": float(row.get("ng2", math.nan)), "eps_gg": float(row.get("eps", math.nan)),
+                       "eps_hf": hf[effect],
+                       "mauchly_w": float(row.get("W_spher", math.nan)),
+                       "p_mauchly": float(row.get("p_spher", math.nan))}
+    return out
+
+
+# --- public ---------------------------------------------------------------------------------
+
+def rm_anova(data: pd.DataFrame, *, dv: str, within: str | list[str], subject: str) -> pd.DataFrame:
+    """Repeated-measures ANOVA with one to three within-subject factors.
+
+    F, df and p come from :class:`statsmodels.stats.anova.AnovaRM` (the univariate test, each
+    effect against its own effect × subject error). Generalised eta squared (``ges``; Olejnik &
+    Algina 2003, as R's ez and afex: SS_effect / (SS_effect + SS_subjects + all error SS)),
+    Greenhouse–Geisser ε and Mauchly's test come from :func:`pingouin.rm_anova`, Huynh–Feldt ε
+    (with Lecoutre's correction, as car/afex, capped at 1) from :func:`pingouin.epsilon`. With
+    three factors (which pingouin does not handle) all of these come from the covariance of the
+    effect's orthonormal contrasts (Kronecker products of Helmert contrasts): ε_GG =
+    tr(S)² / (d·tr(S²)) (Greenhouse & Geisser 1959), ε_HF as above (Huynh & Feldt 1976),
+    Mauchly's W = det(S) / (tr(S)/d)^d with R's chi-square approximation (Mauchly 1940).
+
+    An effect with one degree of freedom (a factor of 2 levels) has sphericity trivially: ε = 1,
+    ``mauchly_w`` and ``p_mauchly`` are NaN and ``p_gg`` = ``p_hf`` = ``p``.
+
+    An effect without error variance (every subject shows exactly the same differences) gets
+    F = inf and p = 0; one without any variance at all F = p = NaN; both with NaN ε and
+    Mauchly, and ``method`` says so (the libraries would return rounding noise there).
+
+    Args:
+        data: long format, exactly one row per subject × cell (average repetitions first).
+        dv: the dependent variable's column (numeric, any unit).
+        within: a factor's column or a list of 1–3 (interactions are named ``"A:B"``).
+        subject: the subject (participant) column.
+
+    Returns:
+        One row per effect (main effects first, then interactions): :data:`TEST_COLUMNS`
+        (test ``"RM-ANOVA"``, statistic ``F``, effect size ``ges``, ``p`` uncorrected), then
+        ``effect``, ``eps_gg``, ``eps_hf``, ``p_gg``, ``p_hf``, ``mauchly_w``, ``p_mauchly`` and
+        ``sphericity`` (Mauchly not rejected at :data:`SPHERICITY_ALPHA`).
+
+    Raises:
+        ParameterError: a missing column, a factor with one level, fewer than 2 subjects, a
+            subject missing a cell or having several values in one (names them).
+
+    References:
+        Greenhouse, S. W., & Geisser, S. (1959). On methods in the analysis of profile data.
+        Psychometrika, 24, 95–112. https://doi.org/10.1007/BF02289823
+
+        Huynh, H., & Feldt, L. S. (1976). Estimation of the Box correction for degrees of
+        freedom from sample data in randomized block and split-plot designs. Journal of
+        Educational Statistics, 1(1), 69–82. https://doi.org/10.3102/10769986001001069
+
+        Lecoutre, B. (1991). A correction for the ε̃ approximate test in repeated measures
+        designs with two or more independent groups. Journal of Educational Statistics, 16(4),
+        371–372. https://doi.org/10.3102/10769986016004371
+
+        Mauchly, J. W. (1940). Significance test for sphericity of a normal n-variate
+        distribution. The Annals of Mathematical Statistics, 11(2), 204–209.
+        https://doi.org/10.1214/aoms/1177731915
+
+        Olejnik, S., & Algina, J. (2003). Generalized eta and omega squared statistics.
+        Psychological Methods, 8(4), 434–447. https://doi.org/10.1037/1082-989X.8.4.434
+
+    Examples:
+        >>> import pandas as pd
+        >>> from realpen.stats.anova import rm_anova
+        >>> data = pd.DataFrame({"subject": [1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4],
+        ...                      "pen": ["a", "b", "c"] * 4,
+        ...                      "score": [3, 5, 6, 2, 4, 4, 4, 6, 7, 3, 3, 5]})
+        >>> row = rm_anova(data, dv="score", within="pen", subject="subject").iloc[0]
+        >>> print(f"{row.effect}: F({row.df1:.0f}, {row.df2:.0f}) = {row.statistic:.2f}, p = {row.p:.4f}")
+        pen: F(2, 6) = 19.00, p = 0.0025
+        >>> print(f"ges = {row.effect_size:.3f}, eps_gg = {row.eps_gg:.3f}, p_gg = {row.p_gg:.4f}")
+        ges = 0.514, eps_gg = 0.750, p_gg = 0.0074
+    """
+    return rm_anova_table(data, dv=dv, within=within, subject=subject, with_pingouin=True)
+
+
+def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subject: str,
+                   with_pingouin: bool) -> pd.DataFrame:
+    """:func:`rm_anova`; with ``with_pingouin`` false, ges, ε and Mauchly come from the
+    contrast covariance for any number of factors (the path three factors always take; the
+    tests check it agrees with pingouin), which saves pingouin's own refits where only F is
+    wanted (the aligned rank transform runs one ANOVA per effect)."""
+    factors = _factor_list(within)
+    wide = _balanced_wide(data, dv=dv, within=factors, subject=subject)
+    long = _safe_long(wide)
+    n = len(wide)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # Without within-subject variation F is 0/0 or x/0; _degenerate says which below.
+        f_table = _anovarm_f(long, len(factors))
+        decomposition = _contrast_decomposition(wide)
+    zero = _ZERO * float((wide.to_numpy(dtype=float) ** 2).sum())
+    if len(factors) <= 2 and with_pingouin:
+        extra = _pingouin_sphericity(long, len(factors))
+        source = ("statsmodels AnovaRM (F, df, p); pingouin.rm_anova (generalised eta squared, "
+                  "Greenhouse-Geisser epsilon, Mauchly); pingouin.epsilon (Huynh-Feldt with "
+                  "Lecoutre's correction, capped at 1)")
+    else:
+        # The subjects' SS is the grand-mean contrast's error term, so this sums it and every
+        # effect × subject error: the denominator of ges in an all-within design.
+        total_error = sum(entry["ss_error"] for entry in decomposition.values())
+        extra = {}
+        for effect in _effects(factors):
+            entry = decomposition[effect]
+            ges = entry["ss"] / (entry["ss"] + total_error)
+            extra[effect] = {"ges": ges, **{key: entry[key] for key in
+                                            ("eps_gg", "eps_hf", "mauchly_w", "p_mauchly")}}
+        source = ("statsmodels AnovaRM (F, df, p); generalised eta squared, Greenhouse-Geisser and "
+                  "Huynh-Feldt (Lecoutre) epsilon and Mauchly's test from the covariance of "
+                  "orthonormal contrasts")
+    rows = []
+    for effect in _effects(factors):
+        f_value, df1, df2, p = f_table[effect]
+        info = extra[effect]
+        method = source
+        part = decomposition[effect]
+        if part["ss_error"] <= zero:
+            # Floating-point dust, not data: an F of 1e30 or 0.18 from 1e-30/1e-29 would mislead.
+            no_effect = part["ss"] <= zero
+            f_value, p = (math.nan, math.nan) if no_effect else (math.inf, 0.0)
+            rows.append(_result_row("RM-ANOVA", "F", f_value, p, n=n, df1=df1, df2=df2,
+                                    method=source + ("; no within-subject variation: F undefined"
+                                                     if no_effect else "; no error variance: F infinite")
+                                    + "; epsilon and Mauchly undefined",
+                                    effect_size_name="ges", effect_size=info["ges"],
+                                    effect=_effect_name(factors, effect), eps_gg=math.nan, eps_hf=math.nan,
+                                    p_gg=p, p_hf=p, mauchly_w=math.nan, p_mauchly=math.nan,
+                                    sphericity=False))
+            continue
+        if df1 <= 1:
+            eps_gg = eps_hf = 1.0
+            mauchly_w = p_mauchly = math.nan
+            sphericity = True
+            method += "; 2 levels: sphericity holds trivially (epsilon = 1)"
+        else:
+            eps_gg, eps_hf = info["eps_gg"], info["eps_hf"]
+            mauchly_w, p_mauchly = info["mauchly_w"], info["p_mauchly"]
+            sphericity = bool(p_mauchly > SPHERICITY_ALPHA)  # False when untestable (NaN)
+        p_gg = float(scipy.stats.f.sf(f_value, df1 * eps_gg, df2 * eps_gg))
+        p_hf = float(scipy.stats.f.sf(f_value, df1 * eps_hf, df2 * eps_hf))
+        rows.append(_result_row("RM-ANOVA", "F", f_value, p, n=n, method=method, df1=df1, df2=df2,
+                                effect_size_name="ges", effect_size=info["ges"],
+                                effect=_effect_name(factors, effect), eps_gg=eps_gg, eps_hf=eps_hf,
+                                p_gg=p_gg, p_hf=p_hf, mauchly_w=mauchly_w, p_mauchly=p_mauchly,
+                                sphericity=sphericity))
+    return tidy(rows)
+
+
+def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: str = "t",
+             adjust: str = "holm", wilcoxon_method: str = "exact",
+             average_over: list[str] | None = None) -> pd.DataFrame:
+    """Paired comparisons of every pair of levels of one within-subject factor.
+
+    Each subject contributes one value per level: its mean over the factors named in
+    ``average_over`` (the data must then hold every subject × level × those factors' cell once),
+    or its single value. ``test="t"``: paired t by :func:`pingouin.ttest` (``paired=True``), with
+    Cohen's d_z = mean / SD of the differences (Lakens 2013); ``test="wilcoxon"``:
+    :func:`realpen.stats.nonparametric.wilcoxon` with ``wilcoxon_method``. The p-values of all
+    pairs are adjusted together by :func:`statsmodels.stats.multitest.multipletests`
+    (``bonferroni``, ``holm``; ``none`` keeps them); a pair that cannot be tested (every
+    difference zero) has NaN p and does not count in the family.
+
+    Args:
+        data: long format.
+        dv: the dependent variable's column (numeric).
+        within: the factor whose levels are compared (levels in Categorical order, else sorted).
+        subject: the subject column.
+        test: ``"t"`` or ``"wilcoxon"``.
+        adjust: ``"bonferroni"``, ``"holm"`` or ``"none"``.
+        wilcoxon_method: ``"exact"``, ``"r"`` or ``"spss"`` (see
+            :func:`realpen.stats.nonparametric.wilcoxon`).
+        average_over: the other within factors, averaged within each subject.
+
+    Returns:
+        One row per pair: :data:`TEST_COLUMNS`, then ``effect`` (``"a-b"``), ``a``, ``b``,
+        ``p_adjusted``, ``adjust``, then the test's own columns (``mean_diff``, the mean of
+        a − b, for t; the Wilcoxon columns for Wilcoxon). The statistic's sign is that of a − b.
+
+    References:
+        Holm, S. (1979). A simple sequentially rejective multiple test procedure. Scandinavian
+        Journal of Statistics, 6(2), 65–70. https://www.jstor.org/stable/4615733
+
+        Lakens, D. (2013). Calculating and reporting effect sizes to facilitate cumulative
+        science: a practical primer for t-tests and ANOVAs. Frontiers in Psychology, 4, 863.
+        https://doi.org/10.3389/fpsyg.2013.00863
+
+    Examples:
+        >>> import pandas as pd
+        >>> from realpen.stats.anova import pairwise
+        >>> data = pd.DataFrame({"subject": [1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4],
+        ...                      "pen": ["a", "b", "c"] * 4,
+        ...                      "score": [3, 5, 6, 2, 4, 4, 4, 6, 7, 3, 3, 5]})
+        >>> table = pairwise(data, dv="score", within="pen", subject="subject", adjust="bonferroni")
+        >>> for row in table.itertuples():
+        ...     print(f"{row.effect}: t = {row.statistic:.2f}, p_bonferroni = {row.p_adjusted:.3f}")
+        a-b: t = -3.00, p_bonferroni = 0.173
+        a-c: t = -8.66, p_bonferroni = 0.010
+        b-c: t = -2.45, p_bonferroni = 0.275
+    """
+    from realpen.stats.nonparametric import WILCOXON_METHODS, wilcoxon
+
+    if not isinstance(within, str):
+        raise ParameterError("within", f"must be one column name, got {within!r}")
+    require_choice("test", test, ("t", "wilcoxon"))
+    require_choice("adjust", adjust, ADJUSTMENTS)
+    require_choice("wilcoxon_method", wilcoxon_method, WILCOXON_METHODS)
+    others = [] if average_over is None else _factor_list(average_over, most=_MAX_FACTORS)
+    if within in others:
+        raise ParameterError("average_over", f"must not contain the compared factor {within!r}")
+    wide = _balanced_wide(data, dv=dv, within=[within, *others], subject=subject)
+    means = wide.T.groupby(level=0, sort=False).mean().T
+    levels = list(means.columns)
+    pairs = list(itertools.combinations(levels, 2))
+    averaged = f" on each subject's mean over {', '.join(others)}" if others else ""
+    rows = []
+    for a, b in pairs:
+        x, y = means[a].to_numpy(), means[b].to_numpy()
+        name = f"{a}-{b}"
+        diff = x - y
+        if test == "t":
+            with warnings.catch_warnings(), np.errstate(divide="ignore", invalid="ignore"):
+                # Identical columns: pingouin warns and gives NaN, which the row reports.
+                warnings.filterwarnings("ignore", message="x and y are equals", category=UserWarning)
+                result = pg.ttest(x, y, paired=True).iloc[0]
+            sd = float(np.std(diff, ddof=1))
+            dz = float(np.mean(diff) / sd) if sd > 0 else math.nan
+            row = _result_row("paired t", "t", float(result["T"]), float(result["p_val"]), n=len(x),
+                              method=f"pingouin.ttest(paired=True){averaged}; cohen_dz = mean/SD of "
+                                     f"differences",
+                              df1=float(result["dof"]), effect_size_name="cohen_dz", effect_size=dz,
+                              effect=name, a=a, b=b, p_adjusted=math.nan, adjust=adjust,
+                              mean_diff=float(np.mean(diff)))
+        elif not diff.any():
+            # One pair without any difference must not sink the other pairs' comparisons.
+            row = _result_row("Wilcoxon signed-rank", "T", math.nan, math.nan, n=len(x),
+                              method=f"{wilcoxon_method}: every difference is zero, nothing to test",
+                              effect_size_name="r", effect=name, a=a, b=b, p_adjusted=math.nan,
+                              adjust=adjust, w_plus=math.nan, z=math.nan, n_nonzero=0, ties=False,
+                              zeros=len(x))
+        else:
+            result = wilcoxon(x, y, method=wilcoxon_method).iloc[0].to_dict()
+            extras = {key: value for key, value in result.items() if key not in TEST_COLUMNS}
+            row = _result_row(result["test"], result["statistic_name"], result["statistic"], result["p"],
+                              n=result["n"], method=result["method"] + averaged, df1=result["df1"],
+                              df2=result["df2"], effect_size_name=result["effect_size_name"],
+                              effect_size=result["effect_size"], effect=name, a=a, b=b,
+                              p_adjusted=math.nan, adjust=adjust, **extras)
+        rows.append(row)
+    p_values = np.array([row["p"] for row in rows])
+    adjusted = p_values.copy()
+    tested = np.isfinite(p_values)
+    if adjust != "none" and tested.any():
+        adjusted[tested] = multipletests(p_values[tested], method=adjust)[1]
+    if adjust == "none":
+        family = "; no multiplicity adjustment"
+    else:
+        family = (f"; {'Bonferroni' if adjust == 'bonferroni' else 'Holm'} over the "
+                  f"{int(tested.sum())} testable of {len(rows)} pairs (statsmodels multipletests)")
+    for row, value in zip(rows, adjusted):
+        row["p_adjusted"] = float(value)
+        row["method"] += family
+    return tidy(rows)
