@@ -1,0 +1,465 @@
+"""The self-contained HTML report of a study analysis: ``report.html``.
+
+:func:`write_report` turns a :class:`realpen.stats.outcome.StudyAnalysis` and its figures
+(:func:`realpen.display.study_figures.save_study_figures`) into one HTML file that opens
+offline and prints: the figures are embedded as ``data:`` URIs, the style is a ``<style>``
+block, and nothing refers to another file or to the network. Every value that comes from the
+data (participant codes, outcome names, notes, the source's name) is escaped.
+
+The sections, in order: title; the data source and options; what the data are (participants,
+excluded ones and why); the methods (verbatim); the results per analysis, with numbers that
+repeat the paper's choices marked ``paper-compatible`` and the reason; the paper's numbers
+beside ours; notes; the figures with captions; the per-cell means; power, if simulated; the
+software versions.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import pandas as pd
+
+from realpen.display.study_figures import figure_caption, split_power, study_figure_names
+from realpen.errors import ParameterError, fail
+from realpen.io.files import atomic_path
+from realpen.stats.results import PAPER_COMPATIBLE, RESULT_COLUMNS
+from realpen.stats.texts import software_versions
+
+__all__ = ["write_report", "report_html", "format_p", "format_df", "format_number",
+           "software_versions"]
+
+REPORT_NAME = "report.html"
+DASH = "—"
+_MIME = {".svg": "image/svg+xml", ".png": "image/png"}
+
+_CSS = """
+body { font: 15px/1.45 system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; color: #1a1a1a;
+       max-width: 80rem; margin: 1.5rem auto; padding: 0 1rem; }
+h1 { font-size: 1.6rem; margin-bottom: .2rem; }
+h2 { font-size: 1.25rem; border-bottom: 1px solid #ccc; padding-bottom: .2rem; margin-top: 2rem; }
+h3 { font-size: 1.05rem; margin: 1.2rem 0 .4rem; font-family: ui-monospace, monospace; }
+table { border-collapse: collapse; margin: .4rem 0 1rem; font-size: .88rem; }
+th, td { border-bottom: 1px solid #ddd; padding: .25rem .55rem; text-align: left;
+         vertical-align: top; }
+th { background: #f3f3f3; font-weight: 600; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+td.key { white-space: nowrap; }
+td.method { font-size: .8rem; color: #444; min-width: 16rem; }
+.wide { overflow-x: auto; }
+tr.paper-compatible td { background: #fff4e0; }
+.badge { display: inline-block; font-size: .72rem; font-weight: 600; padding: 0 .4rem;
+         border: 1px solid #b35900; border-radius: .6rem; color: #8a4500; background: #ffe7c2;
+         white-space: nowrap; }
+figure { margin: 1rem 0 2rem; }
+figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
+figcaption { font-size: .88rem; color: #333; margin-top: .3rem; }
+.methods p { max-width: 50rem; }
+.muted { color: #666; }
+ul.notes li { margin: .2rem 0; }
+@media print {
+  body { font-size: 10pt; max-width: none; margin: 0; }
+  h2 { break-after: avoid; }
+  figure, tr { break-inside: avoid; }
+  .wide { overflow: visible; }
+  tr.paper-compatible td, th, .badge { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
+}
+"""
+
+
+# --------------------------------------------------------------------------- numbers
+
+def _finite(value: object) -> float | None:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    return number if math.isfinite(number) else None
+
+
+def format_p(p: object) -> str:
+    """A p-value as a report shows it: ``< .001``, else 3 decimals without the leading zero.
+
+    Examples:
+        >>> format_p(0.0004), format_p(0.02512), format_p(1.0), format_p(float("nan"))
+        ('< .001', '.025', '1.000', '—')
+    """
+    number = _finite(p)
+    if number is None:
+        return DASH
+    if number < 0.001:
+        return "< .001"
+    text = f"{number:.3f}"
+    return text[1:] if text.startswith("0.") else text
+
+
+def format_df(df: object) -> str:
+    """Degrees of freedom: an integer when whole, else 2 decimals (corrected df).
+
+    Examples:
+        >>> format_df(22.0), format_df(29.8412), format_df(None)
+        ('22', '29.84', '—')
+    """
+    number = _finite(df)
+    if number is None:
+        return DASH
+    if abs(number - round(number)) < 1e-9:
+        return str(int(round(number)))
+    return f"{number:.2f}"
+
+
+def format_number(value: object, digits: int = 3) -> str:
+    """A statistic or effect size with ``digits`` decimals (a rounded zero has no minus sign);
+    missing or non-finite values are a dash.
+
+    Examples:
+        >>> format_number(8.2114), format_number(-0.5), format_number(1934.2, 0)
+        ('8.211', '-0.500', '1934')
+        >>> format_number(-0.0001)
+        '0.000'
+    """
+    number = _finite(value)
+    if number is None:
+        return DASH
+    text = f"{number:.{digits}f}"
+    return text[1:] if text.startswith("-") and float(text) == 0 else text  # no "-0.000"
+
+
+def _quantity(value: object, quantity: str) -> str:
+    """A number of the paper table, formatted by what it is."""
+    if quantity.lower() in ("p", "p_value", "p_adjusted"):
+        return format_p(value)
+    if quantity.lower().startswith("df"):
+        return format_df(value)
+    number = _finite(value)
+    if number is not None and abs(number - round(number)) < 1e-9 and abs(number) >= 10:
+        return str(int(round(number)))
+    return format_number(value)
+
+
+def _difference(ours: object, paper: object) -> str:
+    a, b = _finite(ours), _finite(paper)
+    if a is None or b is None:
+        return DASH
+    return f"{a - b:+.3f}"
+
+
+# --------------------------------------------------------------------------- html pieces
+
+def _e(value: object) -> str:
+    """Any value as escaped HTML text (NaN and None as a dash)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return DASH
+    return html.escape(str(value), quote=True)
+
+
+def _table(header: Sequence[str], rows: Iterable[Sequence[str]], *, row_classes=None,
+           numeric: Iterable[int] = (), keys: Iterable[int] = ()) -> str:
+    """An HTML table; ``rows`` hold cell HTML (already escaped). ``numeric`` columns are right
+    aligned, ``keys`` columns (names a reader scans for) do not wrap."""
+    numeric, keys = set(numeric), set(keys)
+    head = "".join(f"<th>{_e(name)}</th>" for name in header)
+    body = []
+    for k, row in enumerate(rows):
+        css = f' class="{row_classes[k]}"' if row_classes and row_classes[k] else ""
+        cells = "".join(f'<td class="num">{cell}</td>' if j in numeric else
+                        f'<td class="key">{cell}</td>' if j in keys else
+                        f'<td class="method">{cell}</td>' if header[j] == "method" else
+                        f"<td>{cell}</td>" for j, cell in enumerate(row))
+        body.append(f"<tr{css}>{cells}</tr>")
+    return (f'<div class="wide"><table><thead><tr>{head}</tr></thead>'
+            f"<tbody>{''.join(body)}</tbody></table></div>")
+
+
+def _frame(analysis, name: str) -> pd.DataFrame:
+    frame = getattr(analysis, name, None)
+    return frame if isinstance(frame, pd.DataFrame) else pd.DataFrame()
+
+
+def _paper_reason(method: str) -> str:
+    """What a ``paper-compatible: ...`` method says after its mark."""
+    rest = method[len(PAPER_COMPATIBLE):]
+    return rest.lstrip(" :;,—–-") or "repeats the paper's choice"
+
+
+def _source_section(analysis) -> str:
+    rows = [("design", _e(analysis.design)), ("data", _e(analysis.source or "(not given)"))]
+    rows += [(_e(name), _e(value)) for name, value in (analysis.options or {}).items()]
+    return ('<section id="source"><h2>Data source and options</h2>'
+            + _table(("setting", "value"), rows) + "</section>")
+
+
+def _participant_codes(analysis) -> list[str]:
+    for name in ("participants", "cells"):
+        frame = _frame(analysis, name)
+        if "participant" in frame.columns and len(frame):
+            return list(dict.fromkeys(frame["participant"].astype(str)))
+    return []
+
+
+def _data_section(analysis) -> str:
+    codes = _participant_codes(analysis)
+    results = _frame(analysis, "results")
+    parts = ['<section id="data"><h2>The data</h2>']
+    if codes:
+        parts.append(f"<p>{len(codes)} participant{'s' if len(codes) != 1 else ''} analysed: "
+                     f"{', '.join(_e(code) for code in codes)}.</p>")
+    elif "n" in results.columns and results["n"].notna().any():
+        parts.append(f"<p>Up to {int(results['n'].max())} subjects per test.</p>")
+    for name in ("cells", "results"):
+        frame = _frame(analysis, name)
+        if name == "cells" and "outcome" in frame.columns and len(frame):
+            outcomes = list(dict.fromkeys(frame["outcome"].astype(str)))
+            parts.append(f"<p>Outcomes: {', '.join(_e(o) for o in outcomes)}.</p>")
+        elif name == "results":
+            parts.append(f"<p>{len(frame)} test result{'s' if len(frame) != 1 else ''} "
+                         f"(results.csv).</p>")
+    excluded = analysis.excluded or {}
+    if excluded:
+        parts.append(f"<p>Excluded: {len(excluded)} participant"
+                     f"{'s' if len(excluded) != 1 else ''}.</p>")
+        parts.append(_table(("participant", "reason"),
+                            [(_e(code), _e(reason)) for code, reason in excluded.items()]))
+    else:
+        parts.append('<p class="muted">No participant was excluded.</p>')
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def _methods_section(analysis) -> str:
+    paragraphs = "".join(f"<p>{_e(text)}</p>" for text in analysis.methods or [])
+    return ('<section id="methods" class="methods"><h2>Methods</h2>'
+            + (paragraphs or '<p class="muted">No methods text was given.</p>') + "</section>")
+
+
+def _results_section(analysis) -> str:
+    results = _frame(analysis, "results")
+    parts = ['<section id="results"><h2>Results</h2>']
+    missing = [c for c in RESULT_COLUMNS if c not in results.columns]
+    if results.empty or missing:
+        parts.append('<p class="muted">No test results.</p></section>')
+        return "".join(parts)
+    marked = results["method"].astype(str).str.startswith(PAPER_COMPATIBLE)
+    if marked.any():
+        parts.append(f'<p><span class="badge">{PAPER_COMPATIBLE}</span> marks numbers that '
+                     "repeat the paper's choices; they are not recommended, for the reason "
+                     "given beside each.</p>")
+    header = ("outcome", "effect", "test", "statistic", "value", "df1", "df2", "p",
+              "p adjusted", "adjust", "effect size", "value", "n", "method")
+    for name, group in results.groupby("analysis", sort=False):
+        rows, classes = [], []
+        for row in group.itertuples(index=False):
+            method = str(row.method)
+            paper = method.startswith(PAPER_COMPATIBLE)
+            test = _e(row.test) + (f'<br><span class="badge">{PAPER_COMPATIBLE}</span>'
+                                   if paper else "")
+            n = _finite(row.n)
+            rows.append((_e(row.outcome), _e(row.effect), test, _e(row.statistic_name),
+                         format_number(row.statistic), format_df(row.df1), format_df(row.df2),
+                         _e(format_p(row.p)), _e(format_p(row.p_adjusted)), _e(row.adjust),
+                         _e(row.effect_size_name or ""), format_number(row.effect_size),
+                         DASH if n is None else str(int(n)),
+                         _e(_paper_reason(method)) if paper else _e(method)))
+            classes.append(PAPER_COMPATIBLE if paper else "")
+        parts.append(f"<h3>{_e(name)}</h3>")
+        parts.append(_table(header, rows, row_classes=classes,
+                            numeric=(4, 5, 6, 7, 8, 11, 12), keys=(0, 1)))
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def _paper_section(analysis) -> str:
+    paper = _frame(analysis, "paper")
+    if paper.empty:
+        return ""
+    rows = []
+    for row in paper.itertuples(index=False):
+        quantity = str(getattr(row, "quantity", ""))
+        rows.append((_e(row.analysis), _e(row.outcome), _e(row.effect), _e(quantity),
+                     _e(_quantity(row.paper, quantity)), _e(_quantity(row.ours, quantity)),
+                     _difference(row.ours, row.paper), _e(getattr(row, "note", "") or "")))
+    return ('<section id="paper"><h2>The paper\'s numbers beside ours</h2>'
+            + _table(("analysis", "outcome", "effect", "quantity", "paper", "ours",
+                      "ours − paper", "note"), rows, numeric=(4, 5, 6)) + "</section>")
+
+
+def _notes_section(analysis) -> str:
+    if not analysis.notes:
+        return ""
+    items = "".join(f"<li>{_e(note)}</li>" for note in analysis.notes)
+    return f'<section id="notes"><h2>Notes</h2><ul class="notes">{items}</ul></section>'
+
+
+def _embedded(figures: Sequence[str | os.PathLike]) -> dict[str, Path]:
+    """One file per figure (SVG preferred, else PNG), by figure name, in the given order."""
+    chosen: dict[str, Path] = {}
+    for item in figures:
+        path = Path(item)
+        suffix = path.suffix.lower()
+        if suffix not in _MIME:
+            continue  # other formats (pdf) are written for readers, not embedded
+        if not path.is_file():
+            raise fail(path, "no such file (a figure of the report)")
+        if path.stem not in chosen or (suffix == ".svg" and chosen[path.stem].suffix != ".svg"):
+            chosen[path.stem] = path
+    return chosen
+
+
+def _caption_html(name: str, caption: str) -> str:
+    """``Figure 7.`` captions start with their number in bold; the others with their name."""
+    if caption.startswith("Figure "):
+        number, _, rest = caption.partition(". ")
+        return f"<b>{_e(number)}.</b> {_e(rest)}"
+    return f"<b>{_e(name)}.</b> {_e(caption)}"
+
+
+def _figures_section(analysis, figures: Sequence[str | os.PathLike]) -> str:
+    chosen = _embedded(figures)
+    parts = ['<section id="figures"><h2>Figures</h2>']
+    if not chosen:
+        parts.append('<p class="muted">No figures.</p>')
+    known = set(study_figure_names(analysis))
+    for name, path in chosen.items():
+        caption = figure_caption(name, analysis) if name in known else name
+        data = base64.b64encode(path.read_bytes()).decode("ascii")
+        parts.append(f'<figure id="figure-{_e(name)}"><img src="data:{_MIME[path.suffix.lower()]};'
+                     f'base64,{data}" alt="{_e(caption)}"><figcaption>{_caption_html(name, caption)}'
+                     "</figcaption></figure>")
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def _cells_section(analysis) -> str:
+    cells = _frame(analysis, "cells")
+    parts = ['<section id="cells"><h2>Means per cell</h2>']
+    needed = ("outcome", "factor", "level", "mean", "ci_low", "ci_high")
+    if cells.empty or any(c not in cells.columns for c in needed):
+        parts.append('<p class="muted">No cell means.</p></section>')
+        return "".join(parts)
+    rows = []
+    for row in cells.itertuples(index=False):
+        unit = str(getattr(row, "unit", "") or "")
+        digits = 0 if unit == "ms" else 2
+        interval = f"{format_number(row.ci_low, digits)} – {format_number(row.ci_high, digits)}"
+        n = _finite(getattr(row, "n", None))
+        rows.append((_e(row.outcome), _e(row.factor), _e(row.level),
+                     format_number(row.mean, digits), _e(interval),
+                     _e(getattr(row, "ci_method", "")), DASH if n is None else str(int(n)),
+                     _e(unit)))
+    parts.append(_table(("outcome", "factor", "level", "mean", "95 % CI", "CI method", "n",
+                         "unit"), rows, numeric=(3, 4, 6)))
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def _power_section(analysis) -> str:
+    power = getattr(analysis, "power", None)
+    if power is None or len(power) == 0:
+        return ""
+    curves, detectable = split_power(power)
+    parts = ['<section id="power"><h2>Power</h2>']
+    if len(detectable):
+        extra = [name for name in ("parameter", "note") if name in detectable.columns]
+        rows = [(_e(r.outcome), _e(r.test), format_df(r.participants),
+                 *([_e(r.parameter)] if "parameter" in extra else []),
+                 format_number(r.effect_size), format_number(r.power, 2),
+                 *([_e(r.note or "")] if "note" in extra else []))
+                for r in detectable.itertuples(index=False)]
+        header = ("outcome", "test", "participants", *(["parameter"] if "parameter" in extra
+                                                       else []),
+                  "smallest effect", "power there", *(["note"] if "note" in extra else []))
+        parts.append("<p>The smallest effect each main test detects with 80 % power, by "
+                     "simulation (a dash: not reached within the range searched; see the "
+                     "note):</p>")
+        parts.append(_table(header, rows, numeric=(2, header.index("smallest effect"),
+                                                   header.index("power there"))))
+    if len(curves):
+        sims = "sims" in curves.columns
+        rows = [(_e(r.outcome), _e(r.effect), _e(r.test), format_df(r.participants),
+                 format_number(r.effect_size), format_number(r.power, 2),
+                 *([format_df(r.sims)] if sims else []))
+                for r in curves.itertuples(index=False)]
+        parts.append("<p>Simulated power per number of participants and effect size:</p>")
+        parts.append(_table(("outcome", "effect", "test", "participants", "effect size", "power",
+                             *(["simulations"] if sims else [])), rows,
+                            numeric=(3, 4, 5, 6)))
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def _software_section() -> str:
+    rows = [(_e(name), _e(version)) for name, version in software_versions().items()]
+    return ('<section id="software"><h2>Software</h2>'
+            + _table(("software", "version"), rows) + "</section>")
+
+
+# --------------------------------------------------------------------------- the report
+
+def report_html(analysis, figures: Sequence[str | os.PathLike] = ()) -> str:
+    """The report of ``analysis`` as one HTML document (a string); see :func:`write_report`.
+
+    Examples:
+        >>> import pandas as pd
+        >>> from realpen.stats.outcome import StudyAnalysis
+        >>> empty = pd.DataFrame()
+        >>> text = report_html(StudyAnalysis("study1", "Study <1>", empty, empty, empty, empty,
+        ...                                  empty, methods=["Friedman tests."]))
+        >>> "<h1>Study &lt;1&gt;</h1>" in text, "<p>Friedman tests.</p>" in text
+        (True, True)
+    """
+    body = [f"<h1>{_e(analysis.title)}</h1>",
+            f'<p class="muted">RealPen study analysis of design {_e(analysis.design)}.</p>',
+            _source_section(analysis), _data_section(analysis), _methods_section(analysis),
+            _results_section(analysis), _paper_section(analysis), _notes_section(analysis),
+            _figures_section(analysis, figures), _cells_section(analysis),
+            _power_section(analysis), _software_section()]
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+            f"<title>{_e(analysis.title)}</title><style>{_CSS}</style></head><body>"
+            + "\n".join(part for part in body if part) + "</body></html>\n")
+
+
+def write_report(analysis, directory: str | os.PathLike,
+                 figures: Sequence[str | os.PathLike]) -> Path:
+    """Write ``report.html`` for ``analysis`` into ``directory``, atomically, and return its path.
+
+    The file is self-contained: each figure is embedded as a ``data:`` URI (the SVG of a
+    figure when there is one, else its PNG; other formats are skipped), the style is inline,
+    and there is no link to another file or to the network, so it opens offline and can be
+    mailed as it is. Tables come from the analysis as they are (no statistic is computed
+    here): p as ``< .001`` or 3 decimals, statistics and effect sizes with 3, df as integers
+    when whole (else 2 decimals); rows whose ``method`` starts with ``paper-compatible`` carry
+    a badge and the reason. Software versions come from :mod:`importlib.metadata`.
+
+    Args:
+        analysis: a :class:`realpen.stats.outcome.StudyAnalysis`.
+        directory: the folder to write into (made if missing).
+        figures: the figure files to embed, as :func:`realpen.display.study_figures.
+            save_study_figures` returns them (shown in this order, captioned by name).
+
+    Returns:
+        The path of ``report.html``.
+
+    Raises:
+        RealPenError: a figure file is missing, or the folder cannot be written.
+
+    Examples:
+        >>> import pandas as pd, tempfile
+        >>> from realpen.stats.outcome import StudyAnalysis
+        >>> empty = pd.DataFrame()
+        >>> analysis = StudyAnalysis("study1", "Study 1", empty, empty, empty, empty, empty)
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     write_report(analysis, folder, []).name
+        'report.html'
+    """
+    if isinstance(figures, (str, os.PathLike)):
+        raise ParameterError("figures", "must be a list of figure files, not one path")
+    text = report_html(analysis, list(figures))
+    target = Path(directory) / REPORT_NAME
+    with atomic_path(target) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return target
