@@ -129,3 +129,4 @@ from realpen.cli import serve_cmds  # noqa: E402,F401
 from realpen.cli import export_cmds  # noqa: E402,F401
 from realpen.cli import hatt_cmds  # noqa: E402,F401
 from realpen.cli import study_cmds  # noqa: E402,F401
+from realpen.cli import stats_cmds  # noqa: E402,F401

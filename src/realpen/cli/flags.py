@@ -41,6 +41,14 @@ DEFAULT_FLAGS: dict[str, str] = {
     "input_rate": "--input-rate",
     # studies (realpen.study)
     "participants": "--participants",
+    # statistics (realpen.stats)
+    "wilcoxon_method": "--wilcoxon",
+    "adjust": "--adjust",
+    "friedman_variant": "--friedman-blocks",
+    "likert_ci": "--likert-ci",
+    "effect": "--effect",
+    "rates": "--rates",
+    "sims": "--sims",
     # tactile patterns (realpen.tactile)
     "condition": "--condition",
     "actuator": "--actuator",
