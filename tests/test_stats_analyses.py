@@ -156,7 +156,8 @@ def test_paper_compatible_adds_the_papers_df_marked(study2, study2_paper):
     df = {row.effect: (row.df1, row.df2) for row in anova.itertuples()}
     assert df == {"modality": (2, 142), "pen": (2, 142), "modality:pen": (4, 284)}
     assert marked["method"].str.contains("not recommended").all()
-    assert rows(marked, analysis="wilcoxon/modality/paper-compatible").shape[0] == 3 * 3
+    # The paper ran post hoc Wilcoxon tests on study 1's conditions only.
+    assert rows(marked, analysis="wilcoxon/modality/paper-compatible").empty
     # the recommended rows are all still there, unchanged
     plain = study2.results[~study2.results["method"].str.startswith("paper-compatible")]
     unmarked = study2_paper.results[
@@ -185,11 +186,17 @@ def test_the_wilcoxon_method_is_named_and_changes_tied_p(study1_csv):
     trials = read_trials(study1_csv, STUDY1)
     found = {}
     for method in ("exact", "r", "spss"):
-        results = analyse(trials, AnalysisOptions(wilcoxon_method=method)).results
+        results = analyse(trials, AnalysisOptions(wilcoxon_method=method,
+                                                  paper_compatible=method == "exact")).results
         pairs = rows(results, analysis="wilcoxon/condition", outcome="Q1")
         found[method] = pairs["p"].to_numpy()
         assert pairs["method"].str.contains(method if method != "r" else "R").all()
+        if method == "exact":
+            paper = rows(results, analysis="wilcoxon/condition/paper-compatible", outcome="Q1")
+            found["paper"] = paper["p"].to_numpy()
+            assert paper["method"].str.startswith("paper-compatible: SPSS-style").all()
     assert not np.allclose(found["r"], found["spss"])
+    np.testing.assert_allclose(found["paper"], found["spss"], rtol=1e-12)
 
 
 # -- bad data ----------------------------------------------------------------------------------
@@ -213,8 +220,10 @@ def test_a_participant_missing_a_cell_is_refused_or_excluded_and_listed(study1_c
                                            r"condition E; rerun with --exclude-incomplete"):
         analyse(read_trials(path, STUDY1))
     analysis = analyse(read_trials(path, STUDY1), AnalysisOptions(exclude_incomplete=True))
-    assert analysis.excluded == {"S03": "no answer to Q1 in condition E"}
-    assert rows(analysis.results, analysis="friedman/condition")["n"].eq(11).all()
+    assert analysis.excluded == {"S03": "no answer to Q1 in condition E (left out of Q1)"}
+    # left out of the outcome it misses only
+    friedman = rows(analysis.results, analysis="friedman/condition")
+    assert dict(zip(friedman["outcome"], friedman["n"])) == {"Q1": 11, "Q2": 12}
 
 
 @pytest.mark.parametrize(("change", "message"), [
@@ -226,13 +235,59 @@ def test_a_participant_missing_a_cell_is_refused_or_excluded_and_listed(study1_c
     (lambda r: [{**x, "rt_ms": "-3"} for x in r], "rt_ms '-3' is not a number"),
     (lambda r: [{**x, "study": "other"} for x in r],
      "no answers of study 'study1' \\(studies in the file: other\\)"),
-    (lambda r: [x for x in r if x["participant"] == "S01"], "1 complete participant"),
+    (lambda r: [x for x in r if x["participant"] == "S01"],
+     "1 participant of study 'study1' complete in Q1: at least 2 are needed"),
+    (lambda r: [{**x, "condition": "G"} if x["participant"] == "S02" and x["trial"] == "3" else x
+                for x in r], r"participant S02, trial 3: condition 'G' is not planned for Q1"),
+    (lambda r: r + [r[5]], r"participant S01 answers Q2 of trial 3 2 times"),
+    (lambda r: [{**x, "session": "9"} if x["participant"] == "S01" and x["trial"] == "2" else x
+                for x in r], r"participant S01 has answers in 2 sessions \(1, 9\)"),
 ])
 def test_bad_trials_files_get_one_line(study1_csv, tmp_path, change, message):
     path = edited(study1_csv, tmp_path / "bad.csv", change)
     with pytest.raises(RealPenError, match=message) as caught:
         analyse(read_trials(path, STUDY1))
     assert "\n" not in str(caught.value) and str(caught.value).startswith(str(path))
+
+
+def test_two_participants_and_untestable_sphericity_do_not_crash(tmp_path):
+    frame = simulated_trials(STUDY2, 2, seed=1)
+    analysis = analyse(read_trials(write_csv(frame, tmp_path / "two.csv"), STUDY2))
+    anova = rows(analysis.results, analysis="rm-anova", outcome="recognition", test="RM-ANOVA")
+    assert set(anova["df2"]) == {2, 4}  # df1 × (2 - 1)
+    assert anova["method"].str.contains("Mauchly's test untestable").all()
+    assert not any("violated" in note for note in analysis.notes)
+    small = simulated_trials(STUDY1, 2, model=ResponseModel(effect=1.0), seed=1)
+    art = rows(analyse(read_trials(write_csv(small, tmp_path / "s1.csv"), STUDY1)).results,
+               analysis="art/superposition:fluctuation")
+    assert len(art) == 6 and (art["n"] == 2).all()
+
+
+def test_recognition_answers_must_agree_with_the_pen_and_zero_times_are_noted(tmp_path):
+    frame = simulated_trials(STUDY2, 3, seed=2)
+    wrong = frame.copy()
+    index = wrong.index[(wrong["question"] == "pen") & (wrong["phase"] == "experimental")][0]
+    wrong.loc[index, "correct"] = "1" if wrong.loc[index, "correct"] == "0" else "0"
+    with pytest.raises(RealPenError, match=r"correct '\d' disagrees with the answer"):
+        read_trials(write_csv(wrong, tmp_path / "w.csv"), STUDY2)
+    zero = frame.copy()
+    zero.loc[index, "rt_ms"] = 0.0
+    analysis = analyse(read_trials(write_csv(zero, tmp_path / "z.csv"), STUDY2))
+    assert "log_rt: 1 response time of 0 ms left out (no logarithm)" in analysis.notes
+
+
+def test_several_recognition_questions_are_separate_outcomes():
+    document = STUDY2.model_dump(mode="json")
+    second = {**next(q for q in document["questions"] if q["id"] == "pen"), "id": "pen2"}
+    document["questions"].append(second)
+    for group in document["blocks"][0]["trials"]:
+        group["questions"] = ["pen", "pen2"]
+    from realpen.study.design import Design
+
+    design = Design.model_validate(document)
+    names = [(o.name, o.question) for o in outcomes(design) if o.kind != "likert"]
+    assert names == [("recognition:pen", "pen"), ("log_rt:pen", "pen"),
+                     ("recognition:pen2", "pen2"), ("log_rt:pen2", "pen2")]
 
 
 # -- the command ---------------------------------------------------------------------------------

@@ -30,7 +30,7 @@ import pandas as pd
 
 from realpen.errors import ParameterError, fail
 from realpen.stats.anova import pairwise, rm_anova
-from realpen.stats.data import RECOGNITION, Outcome, Trials, cell_values, outcomes
+from realpen.stats.data import Outcome, Trials, cell_values, outcomes
 from realpen.stats.intervals import cell_cis
 from realpen.stats.nonparametric import aligned_rank_transform, friedman
 from realpen.stats.outcome import CELL_COLUMNS, CONFUSION_COLUMNS, PARTICIPANT_COLUMNS, StudyAnalysis
@@ -44,7 +44,8 @@ __all__ = ["AnalysisOptions", "analyse", "FRIEDMAN_VARIANTS", "WILCOXON_METHODS"
 FRIEDMAN_VARIANTS = {
     "average": "(a) each participant's mean over the other factor's levels: one block per "
                "participant",
-    "cells": "(b) participant × level of the other factor as blocks",
+    "cells": "(b) participant × level of the other factor as blocks (blocks of one participant "
+             "are not independent: liberal)",
     "per-level": "(c) one test per level of the other factor",
 }
 """What "a Friedman test of one factor blocked by the other" is reduced to; named in every
@@ -113,55 +114,74 @@ def analyse(trials: Trials, options: AnalysisOptions = AnalysisOptions()) -> Stu
         raise fail(trials.source, f"design '{design.name}' asks no rating or recognition "
                                   f"question: nothing to analyse")
     values: dict[str, pd.DataFrame] = {}
-    incomplete: dict[str, str] = {}
+    missing: dict[str, dict[str, str]] = {}
     for outcome in found:
-        values[outcome.name], missing = cell_values(trials, outcome)
-        for participant, reason in missing.items():
-            incomplete.setdefault(participant, reason)
+        values[outcome.name], missing[outcome.name] = cell_values(trials, outcome)
+    incomplete: dict[str, list[str]] = {}
+    for outcome in found:
+        for participant, reason in missing[outcome.name].items():
+            incomplete.setdefault(participant, []).append(reason)
     if incomplete and not options.exclude_incomplete:
-        participant, reason = next(iter(incomplete.items()))
+        participant, reasons = next(iter(incomplete.items()))
         more = f" ({len(incomplete) - 1} more incomplete)" if len(incomplete) > 1 else ""
-        raise fail(trials.source, f"participant {participant}: {reason}{more}; rerun with "
-                                  f"--exclude-incomplete to leave incomplete participants out")
-    kept = [p for p in trials.participants if p not in incomplete]
-    if len(kept) < 2:
-        raise fail(trials.source, f"{len(kept)} complete participant{'s' if len(kept) != 1 else ''}"
-                                  f" of study '{design.name}': at least 2 are needed")
+        raise fail(trials.source, f"participant {participant}: {reasons[0]}{more}; rerun with "
+                                  f"--exclude-incomplete to leave incomplete participants out "
+                                  f"of the outcomes they miss")
     parts: list[pd.DataFrame] = []
     cells: list[pd.DataFrame] = []
     lines: list[pd.DataFrame] = []
     notes: list[str] = []
+    kept: dict[str, list[str]] = {}
     factorial = _tactile_factorial(design)
     for outcome in found:
+        # Each outcome keeps every participant complete in it: one skipped question does not
+        # take a participant out of the others.
+        kept[outcome.name] = [p for p in trials.participants if p not in missing[outcome.name]]
+        if len(kept[outcome.name]) < 2:
+            count = len(kept[outcome.name])
+            raise fail(trials.source, f"{count} participant{'s' if count != 1 else ''} of study "
+                                      f"'{design.name}' complete in {outcome.name}: at least 2 "
+                                      f"are needed")
         frame = values[outcome.name]
-        frame = frame[frame["participant"].isin(kept)].reset_index(drop=True)
-        if factorial and "condition" in outcome.factors:
-            conditions = [c for c in outcome.levels["condition"]]
-            frame = frame.assign(**{
-                name: pd.Categorical(frame["condition"].astype(str).map(mapping),
-                                     categories=list(dict.fromkeys(mapping[c] for c in conditions)))
-                for name, mapping in ((SUPERPOSITION, factorial[0]), (FLUCTUATION, factorial[1]))})
+        frame = frame[frame["participant"].isin(kept[outcome.name])].reset_index(drop=True)
+        if outcome.kind == "log_rt":
+            _note_zero_times(trials, outcome, kept[outcome.name], notes)
         summary, own = _describe(outcome, frame, options)
         cells.append(summary)
         lines.append(own)
         if outcome.kind == "likert":
-            parts.extend(_likert_tests(outcome, frame, options, factorial is not None, notes))
+            parts.extend(_likert_tests(outcome, frame, options, factorial, notes))
         else:
             parts.extend(_anova_tests(outcome, frame, notes))
     if options.paper_compatible:
         parts.extend(_paper_pseudo_replication(trials, found, kept))
     results = (pd.concat(parts, ignore_index=True) if parts
                else pd.DataFrame(columns=list(RESULT_COLUMNS)))
+    recognition = next((o for o in found if o.kind == "recognition"), None)
     analysis = StudyAnalysis(
         design=design.name, title=design.title, results=results,
         cells=pd.concat(cells, ignore_index=True)[list(CELL_COLUMNS)],
         participants=pd.concat(lines, ignore_index=True)[list(PARTICIPANT_COLUMNS)],
-        confusion=_confusion(trials, found, kept),
-        paper=pd.DataFrame(), excluded={p: incomplete[p] for p in incomplete},
+        confusion=_confusion(trials, recognition,
+                             kept[recognition.name] if recognition is not None else []),
+        paper=pd.DataFrame(),
+        excluded={p: "; ".join(reasons) + " (left out of "
+                  + ", ".join(o.name for o in found if p in missing[o.name]) + ")"
+                  for p, reasons in incomplete.items()},
         notes=notes, options=asdict(options), source=trials.source)
     analysis.paper = paper_numbers(analysis)
-    analysis.methods = methods_paragraphs(analysis, trials, found, kept, factorial is not None)
+    everyone = [p for p in trials.participants if p not in incomplete]
+    analysis.methods = methods_paragraphs(analysis, trials, found, everyone, factorial is not None)
     return analysis
+
+
+def _note_zero_times(trials: Trials, outcome: Outcome, kept: list[str], notes: list[str]) -> None:
+    rows = trials.frame[(trials.frame["question"] == outcome.question)
+                        & trials.frame["participant"].isin(kept)]
+    zero = rows.drop_duplicates(["participant", "trial"])["rt_ms"].eq(0).sum()
+    if zero:
+        notes.append(f"{outcome.name}: {zero} response time{'s' if zero != 1 else ''} of 0 ms "
+                     f"left out (no logarithm)")
 
 
 # -- the conditions as a factorial -------------------------------------------------------------
@@ -216,7 +236,7 @@ def _describe(outcome: Outcome, frame: pd.DataFrame, options: AnalysisOptions
         name = ":".join(by) if by else "all"
         table = cell_cis(means.assign(_all="all") if not by else means, dv="value",
                          by=by or ["_all"], subject="participant",
-                         confidence=options.confidence, method=ci)
+                         confidence=options.confidence, method=ci, seed=options.seed)
         for row in table.itertuples(index=False):
             level = ":".join(str(getattr(row, f)) for f in by) if by else "all"
             mean, low, high = _shown_values(outcome, pd.Series([row.mean, row.ci_low, row.ci_high]))
@@ -240,7 +260,8 @@ def _means_over(frame: pd.DataFrame, factor: str) -> pd.DataFrame:
 
 
 def _likert_tests(outcome: Outcome, frame: pd.DataFrame, options: AnalysisOptions,
-                  factorial: bool, notes: list[str]) -> list[pd.DataFrame]:
+                  factorial: tuple[dict[str, str], dict[str, str]] | None,
+                  notes: list[str]) -> list[pd.DataFrame]:
     parts: list[pd.DataFrame] = []
     factors = list(outcome.factors)
     for factor in factors:
@@ -253,19 +274,33 @@ def _likert_tests(outcome: Outcome, frame: pd.DataFrame, options: AnalysisOption
         result["method"] = result["method"] + averaged
         parts.append(with_context(result, analysis=f"friedman/{factor}", outcome=outcome.name,
                                   effect=factor))
-        parts.extend(_wilcoxon_pairs(outcome, means, factor, options, notes))
-    if factorial:
-        parts.extend(_factorial_friedman(outcome, frame, options))
-        art = _checked(aligned_rank_transform(frame, dv="value",
+        # The paper's post hoc Wilcoxon tests compared its conditions.
+        parts.extend(_wilcoxon_pairs(outcome, means, factor, options, notes,
+                                     paper=factor == "condition"))
+    if factorial is not None and "condition" in factors:
+        split = _split_conditions(outcome, _means_over(frame, "condition"), factorial)
+        parts.extend(_factorial_friedman(outcome, split, options))
+        art = _checked(aligned_rank_transform(split, dv="value",
                                               within=[SUPERPOSITION, FLUCTUATION],
                                               subject="participant"))
         parts.append(with_context(art, analysis=f"art/{SUPERPOSITION}:{FLUCTUATION}",
                                   outcome=outcome.name))
-    elif len(factors) == 2:
+    if len(factors) == 2:
         art = _checked(aligned_rank_transform(frame, dv="value", within=factors,
                                               subject="participant"))
         parts.append(with_context(art, analysis=f"art/{':'.join(factors)}", outcome=outcome.name))
     return parts
+
+
+def _split_conditions(outcome: Outcome, means: pd.DataFrame,
+                      factorial: tuple[dict[str, str], dict[str, str]]) -> pd.DataFrame:
+    """Each participant's mean per condition, with its superposition and fluctuation levels
+    (categorical, in the design's condition order)."""
+    conditions = list(outcome.levels["condition"])
+    return means.assign(**{
+        name: pd.Categorical(means["condition"].astype(str).map(mapping),
+                             categories=list(dict.fromkeys(mapping[c] for c in conditions)))
+        for name, mapping in ((SUPERPOSITION, factorial[0]), (FLUCTUATION, factorial[1]))})
 
 
 def _checked(art: pd.DataFrame) -> pd.DataFrame:
@@ -279,10 +314,10 @@ def _checked(art: pd.DataFrame) -> pd.DataFrame:
 
 
 def _wilcoxon_pairs(outcome: Outcome, means: pd.DataFrame, factor: str, options: AnalysisOptions,
-                    notes: list[str]) -> list[pd.DataFrame]:
+                    notes: list[str], *, paper: bool) -> list[pd.DataFrame]:
     parts = []
     methods = [(options.wilcoxon_method, "")]
-    if options.paper_compatible:
+    if options.paper_compatible and paper:
         methods.append(("spss", _PAPER_WILCOXON))
     for method, mark in methods:
         pairs = pairwise(means, dv="value", within=factor, subject="participant",
@@ -379,7 +414,8 @@ def _rm_anova_rows(frame: pd.DataFrame, factors: list[str], outcome: str, analys
             corrected.update(test=f"{row['test']}, Greenhouse–Geisser", df1=row["df1"] * eps,
                              df2=row["df2"] * eps, p=row["p_gg"])
             rows.append(corrected)
-            if not row.get("sphericity", True) and not mark:
+            if np.isfinite(row.get("p_mauchly", np.nan)) and not row.get("sphericity", True) \
+                    and not mark:
                 notes.append(f"{outcome}: sphericity is violated for {row['effect']} (Mauchly "
                              f"p = {row['p_mauchly']:.3f}): read its Greenhouse–Geisser row")
     result = pd.DataFrame(rows)
@@ -390,14 +426,16 @@ def _rm_anova_rows(frame: pd.DataFrame, factors: list[str], outcome: str, analys
 def _sphericity_text(row: dict) -> str:
     if row["df1"] <= 1:
         return "two levels: sphericity holds trivially"
-    text = (f"ε_GG = {row['eps_gg']:.3f}, ε_HF = {row['eps_hf']:.3f}")
+    text = f"ε_GG = {row['eps_gg']:.3f}, ε_HF = {row['eps_hf']:.3f}"
     if np.isfinite(row.get("p_mauchly", np.nan)):
         verdict = "held" if row.get("sphericity", True) else "violated"
         text += f"; Mauchly W = {row['mauchly_w']:.3f}, p = {row['p_mauchly']:.3f} ({verdict})"
+    else:
+        text += "; Mauchly's test not computable: read the Greenhouse–Geisser row"
     return text
 
 
-def _paper_pseudo_replication(trials: Trials, found: list[Outcome], kept: list[str]
+def _paper_pseudo_replication(trials: Trials, found: list[Outcome], kept: dict[str, list[str]]
                               ) -> list[pd.DataFrame]:
     """The paper's recognition ANOVA: every repetition of a participant its own subject."""
     parts = []
@@ -406,11 +444,14 @@ def _paper_pseudo_replication(trials: Trials, found: list[Outcome], kept: list[s
             continue
         rows = trials.frame[(trials.frame["question"] == outcome.question)
                             & trials.frame["correct"].notna()
-                            & trials.frame["participant"].isin(kept)].sort_values("trial")
+                            & trials.frame["participant"].isin(kept[outcome.name])]
+        rows = rows.sort_values(["participant", "trial"], kind="stable")
         factors = list(outcome.factors)
         repetition = rows.groupby(["participant", *factors], sort=False).cumcount() + 1
         pseudo = rows.assign(subject=rows["participant"].astype(str) + "#" + repetition.astype(str),
-                             value=rows["correct"])
+                             value=rows["correct"],
+                             **{name: pd.Categorical(rows[name], categories=list(outcome.levels[name]))
+                                for name in factors})
         counts = pseudo.groupby("subject").size()
         complete = counts[counts == len(outcome.cells)].index
         pseudo = pseudo[pseudo["subject"].isin(complete)]
@@ -418,7 +459,8 @@ def _paper_pseudo_replication(trials: Trials, found: list[Outcome], kept: list[s
         parts.append(_rm_anova_rows(pseudo, factors, outcome.name, "rm-anova", [], mark=mark,
                                     subject="subject"))
         for factor in factors:
-            means = pseudo.groupby(["subject", factor], sort=False)["value"].mean().reset_index()
+            means = pseudo.groupby(["subject", factor], sort=False, observed=True)["value"] \
+                .mean().reset_index()
             pairs = pairwise(means, dv="value", within=factor, subject="subject", test="t",
                              adjust="bonferroni")
             pairs["method"] = mark + "; " + pairs["method"]
@@ -428,8 +470,8 @@ def _paper_pseudo_replication(trials: Trials, found: list[Outcome], kept: list[s
     return parts
 
 
-def _confusion(trials: Trials, found: list[Outcome], kept: list[str]) -> pd.DataFrame:
-    recognition = next((o for o in found if o.name == RECOGNITION), None)
+def _confusion(trials: Trials, recognition: Outcome | None, kept: list[str]) -> pd.DataFrame:
+    """Presented pen × chosen pen per modality, of the (first) recognition question."""
     if recognition is None:
         return pd.DataFrame(columns=list(CONFUSION_COLUMNS))
     rows = trials.frame[(trials.frame["question"] == recognition.question)

@@ -190,16 +190,21 @@ def _hf_from_gg(eps_gg: float, n: int, d: int) -> float:
     """
     if d <= 1:
         return 1.0
-    return float(min((n * d * eps_gg - 2) / (d * (n - 1 - d * eps_gg)), 1.0))
+    denominator = d * (n - 1 - d * eps_gg)
+    if denominator <= 0:  # too few subjects for the estimate (e.g. 2 subjects, 3 levels)
+        return math.nan
+    return float(min((n * d * eps_gg - 2) / denominator, 1.0))
 
 
 def _mauchly(cov: np.ndarray, df_resid: int, k: int) -> tuple[float, float]:
     """Mauchly's W and p from the covariance of d orthonormal contrasts (R's ``mauchly.test``
     with its second-order term, as pingouin.sphericity; ``k`` the number of cells of the effect)."""
     d = cov.shape[0]
+    f = 1 - (2 * d**2 + d + 2) / (6 * d * df_resid)
+    if df_resid < d or f <= 0:  # a rank-deficient covariance: the test is undefined
+        return math.nan, math.nan
     sign, logdet = np.linalg.slogdet(cov)
     log_w = logdet - d * math.log(np.trace(cov) / d) if sign > 0 else -math.inf
-    f = 1 - (2 * d**2 + d + 2) / (6 * d * df_resid)
     w2 = (d + 2) * (d - 1) * (d - 2) * (2 * d**3 + 6 * d**2 + 3 * k + 2) / (288 * (df_resid * d * f) ** 2)
     chi2 = -df_resid * f * log_w
     ddof = d * (d + 1) / 2 - 1
@@ -356,7 +361,10 @@ def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subj
         f_table = _anovarm_f(long, len(factors))
         decomposition = _contrast_decomposition(wide)
     zero = _ZERO * float((wide.to_numpy(dtype=float) ** 2).sum())
-    if len(factors) <= 2 and with_pingouin:
+    widest = int(np.prod([len(level) - 1 for level in wide.columns.levels]))
+    # pingouin's Mauchly divides by zero when subjects are fewer than an effect's contrasts + 1;
+    # the contrast path gives NaN there (Mauchly is undefined) and the same numbers otherwise.
+    if len(factors) <= 2 and with_pingouin and n - 1 >= widest:
         extra = _pingouin_sphericity(long, len(factors))
         source = ("statsmodels AnovaRM (F, df, p); pingouin.rm_anova (generalised eta squared, "
                   "Greenhouse-Geisser epsilon, Mauchly); pingouin.epsilon (Huynh-Feldt with "
@@ -401,6 +409,11 @@ def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subj
         else:
             eps_gg, eps_hf = info["eps_gg"], info["eps_hf"]
             mauchly_w, p_mauchly = info["mauchly_w"], info["p_mauchly"]
+            if n - 1 < df1:
+                # Mauchly's test needs the contrasts' covariance to have full rank.
+                mauchly_w = p_mauchly = math.nan
+                method += (f"; Mauchly's test untestable: {n} subjects give n - 1 < {df1:g} "
+                           f"contrasts")
             sphericity = bool(p_mauchly > SPHERICITY_ALPHA)  # False when untestable (NaN)
         p_gg = float(scipy.stats.f.sf(f_value, df1 * eps_gg, df2 * eps_gg))
         p_hf = float(scipy.stats.f.sf(f_value, df1 * eps_hf, df2 * eps_hf))

@@ -54,6 +54,8 @@ class Outcome:
         unit: ``points``, ``%`` or ``ms`` (how the report shows cell means).
         points: the Likert scale's top (0 for other kinds).
         cells: the planned cells, as tuples in ``factors`` order.
+        allowed: for each of :data:`FACTOR_COLUMNS`, the values its answers may have (the
+            planned ones).
     """
 
     name: str
@@ -64,6 +66,7 @@ class Outcome:
     unit: str
     points: int = 0
     cells: tuple[tuple[str, ...], ...] = ()
+    allowed: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
 
 @dataclass
@@ -130,8 +133,9 @@ def read_trials(path: str | os.PathLike, design: Design) -> Trials:
                             for row in frame.itertuples()]
                            if "repetition" in frame.columns else 0)
     frame["rt_ms"] = [_milliseconds(source, row) for row in frame.itertuples()]
-    frame["correct"] = [_correct(source, row) for row in frame.itertuples()]
+    frame["correct"] = [_correct(source, row, design) for row in frame.itertuples()]
     frame["value"] = [_rating(source, row, design) for row in frame.itertuples()]
+    _check_keys(source, frame)
     participants = list(dict.fromkeys(frame["participant"]))
     training = frame[frame["phase"] == "training"]
     unknown = frame[~frame["phase"].isin(("training",) + _ANALYSED_PHASES)]
@@ -142,6 +146,26 @@ def read_trials(path: str | os.PathLike, design: Design) -> Trials:
     analysed = frame[frame["phase"].isin(_ANALYSED_PHASES)]
     return Trials(frame=analysed.reset_index(drop=True), training=training.reset_index(drop=True),
                   design=design, source=source, participants=participants)
+
+
+def _check_keys(source: str, frame: pd.DataFrame) -> None:
+    """One session per participant, one answer per trial and question: merged exports must not
+    pool two people under one code, nor count an answer twice."""
+    sessions = frame.groupby("participant", sort=False)["session"].unique()
+    for participant, found in sessions.items():
+        if len(found) > 1:
+            raise fail(source, f"participant {participant} has answers in {len(found)} sessions "
+                               f"({', '.join(map(str, found[:4]))}): give every participant "
+                               f"their own code")
+    repeated = frame[frame.duplicated(["participant", "trial", "question"], keep=False)]
+    if not repeated.empty:
+        first = repeated.iloc[0]
+        lines = repeated[(repeated["trial"] == first.trial)
+                         & (repeated["question"] == first.question)
+                         & (repeated["participant"] == first.participant)]["line"].tolist()
+        raise fail(source, f"lines {', '.join(map(str, lines[:4]))}: participant "
+                           f"{first.participant} answers {first.question} of trial "
+                           f"{first.trial} {len(lines)} times")
 
 
 def _where(source: str, row) -> str:
@@ -167,12 +191,18 @@ def _milliseconds(source: str, row) -> float:
     return value
 
 
-def _correct(source: str, row) -> float:
-    if row.correct in ("1", "0"):
-        return float(row.correct)
-    if row.correct == "":
-        return math.nan
-    raise fail(_where(source, row), f"correct '{row.correct}' must be 1, 0 or empty")
+def _correct(source: str, row, design: Design) -> float:
+    question = _question(design, row.question)
+    if question is None or question.correct != "pen" or row.phase not in _ANALYSED_PHASES:
+        if row.correct in ("1", "0", ""):
+            return float(row.correct) if row.correct else math.nan
+        raise fail(_where(source, row), f"correct '{row.correct}' must be 1, 0 or empty")
+    right = "1" if row.answer == row.pen else "0"
+    if row.correct != right:
+        raise fail(_where(source, row), f"correct '{row.correct}' disagrees with the answer "
+                                        f"'{row.answer}' to {row.question} for pen '{row.pen}' "
+                                        f"(expected {right})")
+    return float(right)
 
 
 def _rating(source: str, row, design: Design) -> float:
@@ -209,6 +239,8 @@ def outcomes(design: Design) -> list[Outcome]:
     """
     plan = [trial for trial in participant_plan(design, 0) if trial.phase in _ANALYSED_PHASES]
     found: list[Outcome] = []
+    recognitions = [q.id for q in design.questions if q.type == "choice" and q.correct == "pen"
+                    and any(q.id in trial.questions for trial in plan)]
     for question in design.questions:
         trials = [trial for trial in plan if question.id in trial.questions]
         if not trials or question.type == "text":
@@ -224,14 +256,18 @@ def outcomes(design: Design) -> list[Outcome]:
         levels = {name: tuple(dict.fromkeys(cell[i] for cell in cells))
                   for name, i in zip(factors, indices)}
         levels = {name: _design_order(design, name, values) for name, values in levels.items()}
+        allowed = {name: tuple(dict.fromkeys(cell[i] for cell in cells))
+                   for i, name in enumerate(FACTOR_COLUMNS)}
+        # Several recognition questions each get their own outcome names.
+        suffix = f":{question.id}" if len(recognitions) > 1 else ""
         if question.type == "likert":
             found.append(Outcome(question.id, "likert", question.id, tuple(factors), levels,
-                                 "points", question.points, planned))
+                                 "points", question.points, planned, allowed))
         elif question.correct == "pen":
-            found.append(Outcome(RECOGNITION, "recognition", question.id, tuple(factors), levels,
-                                 "%", 0, planned))
-            found.append(Outcome(LOG_RT, "log_rt", question.id, tuple(factors), levels, "ms", 0,
-                                 planned))
+            found.append(Outcome(RECOGNITION + suffix, "recognition", question.id,
+                                 tuple(factors), levels, "%", 0, planned, allowed))
+            found.append(Outcome(LOG_RT + suffix, "log_rt", question.id, tuple(factors), levels,
+                                 "ms", 0, planned, allowed))
     return found
 
 
@@ -255,6 +291,13 @@ def cell_values(trials: Trials, outcome: Outcome) -> tuple[pd.DataFrame, dict[st
         the first missing cell, worded for a reader (``"no answer to Q1 in condition E"``).
     """
     rows = trials.frame[trials.frame["question"] == outcome.question]
+    for column, values in outcome.allowed.items():
+        stray = rows[~rows[column].isin(values)]
+        if not stray.empty:
+            row = stray.iloc[0]
+            raise fail(_where(trials.source, row), f"{column} '{row[column]}' is not planned for "
+                                                   f"{outcome.question} (the design's: "
+                                                   f"{', '.join(values)})")
     factors = list(outcome.factors)
     if outcome.kind == "likert":
         rows = rows[rows["value"].notna()]
@@ -263,6 +306,7 @@ def cell_values(trials: Trials, outcome: Outcome) -> tuple[pd.DataFrame, dict[st
         rows = rows[rows["correct"].notna()]
         column = "correct"
     else:
+        # A 0 ms response time has no logarithm; analyse() notes how many were left out.
         rows = rows[rows["rt_ms"] > 0].assign(log_rt=lambda f: np.log(f["rt_ms"]))
         column = "log_rt"
     grouped = (rows.groupby(["participant", *factors], sort=False, observed=True)[column]

@@ -110,7 +110,7 @@ def _bootstrap(array: np.ndarray, level: float, n_boot: int, seed: int, kind: st
 
 
 def cell_cis(data: pd.DataFrame, *, dv: str, by: list[str], subject: str, confidence: float = 0.95,
-             method: str = "t") -> pd.DataFrame:
+             method: str = "t", seed: int = 0) -> pd.DataFrame:
     """Mean and confidence interval of ``dv`` per cell of ``by``, over subjects.
 
     Each subject's values in a cell are first averaged to one cell value (so repetitions do not
@@ -122,7 +122,8 @@ def cell_cis(data: pd.DataFrame, *, dv: str, by: list[str], subject: str, confid
         by: the columns that define a cell (one or more).
         subject: the subject column.
         confidence: as :func:`mean_ci`.
-        method: ``"t"`` or ``"bootstrap"`` (seed 0, 10 000 resamples).
+        method: ``"t"`` or ``"bootstrap"`` (10 000 resamples).
+        seed: the bootstrap's seed (every cell's generator starts from it).
 
     Returns:
         One row per cell (in the columns' Categorical order, else sorted): the ``by`` columns,
@@ -159,7 +160,7 @@ def cell_cis(data: pd.DataFrame, *, dv: str, by: list[str], subject: str, confid
     per_subject = data.assign(**{dv: values}).groupby([*by, subject], observed=True, sort=True)[dv].mean()
     rows = []
     for cell, group in per_subject.groupby(level=list(range(len(by))), observed=True, sort=True):
-        mean, low, high = mean_ci(group.to_numpy(), confidence=confidence, method=method)
+        mean, low, high = mean_ci(group.to_numpy(), confidence=confidence, method=method, seed=seed)
         cell = cell if isinstance(cell, tuple) else (cell,)
         rows.append({**dict(zip(by, cell)), "mean": mean, "ci_low": low, "ci_high": high, "n": len(group)})
     return pd.DataFrame(rows, columns=[*by, "mean", "ci_low", "ci_high", "n"])

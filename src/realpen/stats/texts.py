@@ -13,8 +13,9 @@ __all__ = ["methods_paragraphs", "software_versions"]
 _PACKAGES = ("realpen", "numpy", "scipy", "pandas", "statsmodels", "pingouin", "matplotlib")
 _WILCOXON = {
     "exact": "the exact null distribution of the signed-rank statistic without ties or zeros, "
-             "and with them the exact permutation distribution of the signs (scipy.stats."
-             "wilcoxon; all 2^n sign patterns up to n = 20)",
+             "and with them the exact permutation distribution of the signs (all 2^n sign "
+             "patterns up to n = 20 non-zero differences, as scipy.stats.wilcoxon's permutation "
+             "method; above 20, a Monte Carlo of 100,000 sign patterns with seed 0)",
     "r": "R's wilcox.test default: exact without ties or zeros (n < 50), otherwise the normal "
          "approximation with continuity correction and tie-corrected variance",
     "spss": "the normal approximation without continuity correction, with tie-corrected "
@@ -47,11 +48,13 @@ def methods_paragraphs(analysis: StudyAnalysis, trials: Trials, found: list[Outc
     confidence = f"{100 * options['confidence']:g} %"
     kinds = {outcome.kind for outcome in found}
     paragraphs = []
-    excluded = (f" {len(analysis.excluded)} participant{'s' if len(analysis.excluded) != 1 else ''}"
-                f" missing planned cells {'were' if len(analysis.excluded) != 1 else 'was'} "
-                f"excluded (listed below)." if analysis.excluded else "")
+    count = len(analysis.excluded)
+    excluded = (f" {count} participant{'s' if count != 1 else ''} missing planned cells "
+                f"{'were' if count != 1 else 'was'} left out of the outcomes concerned only "
+                f"(listed below, with those outcomes)." if analysis.excluded else "")
     paragraphs.append(
-        f"Data: {len(kept)} participants of study '{analysis.design}' from {trials.source}."
+        f"Data: {len(trials.participants)} participants of study '{analysis.design}' from "
+        f"{trials.source}; {len(kept)} complete in every outcome."
         f"{excluded} Training trials ({len(trials.training)} answers) were not analysed. Each "
         f"participant contributes one value per cell: the mean rating of a Likert question, "
         f"the proportion of correct recognitions, or the mean of the natural log of the response "
@@ -72,16 +75,21 @@ def methods_paragraphs(analysis: StudyAnalysis, trials: Trials, found: list[Outc
                      f"(and the reverse) is reduced by variant '{options['friedman_variant']}'; "
                      f"the variants are (a) average over the other factor, (b) participant × "
                      f"other level as blocks, (c) one test per other level. Their interaction is "
-                     f"tested with the aligned rank transform (Wobbrock et al., CHI 2011): "
-                     f"responses aligned for each effect, ranked, and analysed by a "
-                     f"repeated-measures ANOVA of the ranks (statsmodels AnovaRM).")
+                     f"tested with the aligned rank transform (Wobbrock et al., CHI 2011) on "
+                     f"each participant's mean per condition: responses aligned for each "
+                     f"effect, ranked, and analysed by a repeated-measures ANOVA of the ranks "
+                     f"(statsmodels AnovaRM) in which each effect is tested against its own "
+                     f"effect × participant error (ARTool's Error(S) model pools these errors "
+                     f"and so reports larger error df).")
         elif any(len(o.factors) == 2 for o in found if o.kind == "likert"):
             text += (" Interactions of two factors: the aligned rank transform (Wobbrock et al., "
-                     "CHI 2011) with a repeated-measures ANOVA of the aligned ranks.")
+                     "CHI 2011) with a repeated-measures ANOVA of the aligned ranks, each effect "
+                     "against its own effect × participant error.")
         text += (f" Means are shown with {confidence} "
                  + ("BCa bootstrap intervals (scipy.stats.bootstrap, 10,000 resamples, seed "
-                    f"{options['seed']})" if options['likert_ci'] == 'bootstrap'
-                    else "Student t intervals") + ".")
+                    f"{options['seed']}; percentile intervals where BCa is undefined, e.g. "
+                    f"when every participant gave the same rating)"
+                    if options['likert_ci'] == 'bootstrap' else "Student t intervals") + ".")
         paragraphs.append(text)
     if kinds & {"recognition", "log_rt"}:
         paragraphs.append(
@@ -97,8 +105,9 @@ def methods_paragraphs(analysis: StudyAnalysis, trials: Trials, found: list[Outc
     if options["paper_compatible"]:
         paragraphs.append(
             "Paper-compatible numbers (marked in every table and in results.csv, where method "
-            "starts with 'paper-compatible'): the Wilcoxon p-values SPSS gives (normal "
-            "approximation without continuity correction), and for recognition the ANOVA and "
+            "starts with 'paper-compatible'): for the post hoc comparisons of conditions, the "
+            "Wilcoxon p-values SPSS gives (normal approximation without continuity correction), "
+            "and for recognition the ANOVA and "
             "pairwise tests with each repetition of a participant as its own subject, which is "
             "what the paper's F(2, 142) and F(4, 284) imply. They are given to reproduce the "
             "paper; they are not recommended: the first is inaccurate for small tied samples, "
