@@ -326,8 +326,7 @@ def test_power_command_prints_a_table_and_plots(tmp_path):
     lines = [line for line in result.stdout.splitlines() if line.startswith(("realism",
                                                                              "recognition"))]
     assert len(lines) == 4
-    powers = {tuple(line.split()[:1] + line.split()[4:5]): float(line.split()[-1])
-              for line in lines}
+    powers = {(line.split()[0], line.split()[-2]): float(line.split()[-1]) for line in lines}
     assert powers[("realism", "16")] > powers[("realism", "8")]
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -347,3 +346,31 @@ def test_simulated_participants_through_the_store_to_the_report(tmp_path):
     found = table[(table["analysis"] == "friedman/condition") & (table["outcome"] == "Q1")]
     assert found["n"].tolist() == [6] and found["df1"].tolist() == [5]
     assert (out / "figure7.svg").exists() and (out / "report.html").stat().st_size > 10_000
+    (out / "results.csv").write_text("stale")
+    again = run_cli("stats", "study1", str(trials), "-o", str(out), "--power-sims", "0",
+                    "--force")
+    assert again.returncode == 0, again.stderr
+    assert pd.read_csv(out / "results.csv").equals(table)  # replaced whole, same numbers
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_only_a_report_folder_is_ever_replaced(tmp_path, monkeypatch):
+    from realpen.stats.outputs import MARKER, check_report_folder
+
+    monkeypatch.chdir(tmp_path)
+    report, foreign, empty = tmp_path / "report", tmp_path / "thesis", tmp_path / "empty"
+    for folder in (report, foreign, empty):
+        folder.mkdir()
+    (report / MARKER).write_text("")
+    (report / "results.csv").write_text("")
+    (foreign / "thesis.tex").write_text("keep me")
+    assert check_report_folder(report, replace=True) == report
+    assert check_report_folder(empty, replace=True) == empty
+    with pytest.raises(RealPenError, match="thesis: is a folder no report made"):
+        check_report_folder(foreign, replace=True)
+    with pytest.raises(RealPenError, match="report: exists; pass --force"):
+        check_report_folder(report, replace=False)
+    with pytest.raises(RealPenError, match="holds the current folder"):
+        check_report_folder(Path("."), replace=True)
+    with pytest.raises(RealPenError, match="parent folder .* does not exist"):
+        check_report_folder(tmp_path / "no" / "report", replace=False)

@@ -232,7 +232,7 @@ def test_simulated_answers_go_through_the_store_and_export_unchanged(study2, tmp
             assert np.allclose(exported[column].astype(float), expected[column], rtol=0, atol=1e-3)
         else:
             assert exported[column].tolist() == expected[column].astype(str).tolist(), column
-    with pytest.raises(RealPenError, match="already holds participant S01 of 'study2'"):
+    with pytest.raises(RealPenError, match="already holds 2 sessions of 'study2'"):
         simulate_store(study2, 1, store, model=model)
 
 
@@ -243,7 +243,7 @@ def test_bad_arguments_are_one_line(study1, study2):
         ResponseModel(rates={"tactile": 1.5})
     with pytest.raises(ParameterError, match="^participant_sd: must be >= 0"):
         ResponseModel(participant_sd=-1)
-    with pytest.raises(ParameterError, match="^model: rates has no recognition rate for the "
+    with pytest.raises(ParameterError, match="^rates: no recognition rate for the "
                                              "modality 'auditory'"):
         simulated_trials(study2, 2, model=ResponseModel(rates={"tactile": 0.5}))
     with pytest.raises(ParameterError, match="^participants: must be >= 1, got 0$"):

@@ -66,8 +66,9 @@ def sub_app(name: str, help: str) -> typer.Typer:
 def command_path(args: Sequence[str]) -> str:
     """The subcommand that ``args`` (the arguments after ``realpen``) runs, e.g. ``"sound loop"``.
 
-    Options are skipped; the walk stops at the first word that is not a subcommand. Empty for
-    the top level.
+    Options are skipped; the walk stops at the first word that is not a subcommand (where a
+    group runs a default subcommand then, that one is the path's last word). Empty for the top
+    level.
     """
     command = typer.main.get_command(app)
     path: list[str] = []
@@ -78,6 +79,9 @@ def command_path(args: Sequence[str]) -> str:
             continue
         commands = getattr(command, "commands", None)
         if not commands or token not in commands:
+            default = getattr(command, "default_command", None)  # `realpen stats DESIGN ...`
+            if commands and default in commands:
+                path.append(default)
             break
         command = commands[token]
         path.append(token)
@@ -113,6 +117,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     except OSError as error:  # a path the system refuses (too long, a link loop, no access)
         where = f"{error.filename}: " if error.filename else ""
         _fail(f"{where}{error.strerror or error}", 2)
+    if code == 130:  # typer turns Ctrl-C into this exit code before our handler sees it
+        _fail("interrupted", 130)
     sys.exit(code if isinstance(code, int) else 0)
 
 

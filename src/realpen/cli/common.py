@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
@@ -13,7 +14,8 @@ from rich.console import Console
 from realpen.errors import RealPenError, fail
 
 __all__ = ["console", "err_console", "PROGRESS_AFTER_S", "progress_bar", "force_option",
-           "check_outputs", "same_file", "whole_number"]
+           "check_outputs", "same_file", "whole_number", "design_input", "working",
+           "terminate_as_interrupt"]
 
 # Markup off: paths, tool names and descriptions are the user's text, not rich markup.
 console = Console(soft_wrap=True, markup=False, highlight=False)
@@ -132,3 +134,40 @@ def progress_bar(label: str, enabled: bool = True) -> Iterator:
             progress.update(task, completed=done, total=total)
 
         yield update
+
+
+def design_input(design: str) -> dict[str, Path | None]:
+    """A DESIGN argument as an input no output may replace (a built-in name is none)."""
+    path = Path(design) if design.strip() else None
+    return {"design": path if path is not None and path.exists() else None}
+
+
+@contextlib.contextmanager
+def working(label: str) -> Iterator[None]:
+    """A spinner with ``label`` on stderr while a long step runs (only on a terminal)."""
+    if not err_console.is_terminal:
+        yield
+        return
+    with err_console.status(label):
+        yield
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM and SIGHUP end the block as Ctrl-C does (KeyboardInterrupt), so its clean-up
+    (temporary files, a half-made folder) runs before the process ends."""
+    wanted = [sig for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)) if sig is not None]
+    try:
+        previous = {sig: signal.signal(sig, _interrupt) for sig in wanted}
+    except ValueError:  # not the main thread (an embedding program): leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

@@ -80,6 +80,8 @@ DEFAULT_FLAGS: dict[str, str] = {
 }
 
 COMMAND_FLAGS: dict[str, dict[str, str]] = {
+    # The report's power simulation is --power-sims.
+    "stats report": {"sims": "--power-sims"},
     # The recording's rate (a CSV without time) is --input-rate; --rate is the pattern's.
     "tactile": {"load_recording.rate": "--input-rate"},
     "profile build": {

@@ -14,7 +14,16 @@ from pathlib import Path
 import typer
 
 from realpen.cli import CONTEXT_SETTINGS, app
-from realpen.cli.common import check_outputs, console, force_option, progress_bar, whole_number
+from realpen.cli.common import (
+    check_outputs,
+    console,
+    design_input,
+    force_option,
+    progress_bar,
+    terminate_as_interrupt,
+    whole_number,
+    working,
+)
 
 try:  # recent typer releases carry their own copy of click
     from typer.core import TyperGroup
@@ -28,9 +37,11 @@ class _ReportByDefault(TyperGroup):
     """``realpen stats DESIGN ...`` runs ``report``: the group's first word is a command only
     when it names one."""
 
+    default_command = "report"
+
     def parse_args(self, ctx, args):
-        if args and args[0] not in self.commands and not args[0].startswith("-"):
-            args = ["report", *args]
+        if args and args[0] not in self.commands and args[0] not in ("-h", "--help"):
+            args = [self.default_command, *args]
         if args and args[0] == "power":
             args = _spread_participants(args)
         return super().parse_args(ctx, args)
@@ -62,6 +73,14 @@ def _spread_participants(args: list[str]) -> list[str]:
     return spread
 
 
+def _power_sims(value: int) -> int:
+    """--power-sims: 0 (no power section) or enough simulated studies to mean something."""
+    whole_number(value)
+    if value != 0 and not 10 <= value <= 1_000_000:
+        raise typer.BadParameter(f"give 0 (leave the power out) or 10 to 1,000,000, got {value}")
+    return value
+
+
 stats_app = typer.Typer(
     cls=_ReportByDefault, no_args_is_help=True, context_settings=CONTEXT_SETTINGS,
     help="The studies' statistics: `realpen stats DESIGN trials.csv -o REPORT_DIR` (the "
@@ -84,8 +103,9 @@ def report(
     wilcoxon: str = typer.Option("exact", "--wilcoxon",
                                  help="Wilcoxon p-values: exact, r (R's wilcox.test) or spss."),
     adjust: str = typer.Option("holm", "--adjust",
-                               help="Adjustment of the Wilcoxon post hoc p: holm, bonferroni "
-                                    "or none."),
+                               help="Adjustment of the Wilcoxon post hoc p (and of the "
+                                    "--friedman-blocks per-level tests): holm, bonferroni or "
+                                    "none."),
     friedman_blocks: str = typer.Option(
         "average", "--friedman-blocks",
         help="How a factor is tested 'blocked by' the other: average (over the other factor), "
@@ -94,40 +114,51 @@ def report(
                                   help="Intervals of rating means: bootstrap (BCa) or t."),
     exclude_incomplete: bool = typer.Option(
         False, "--exclude-incomplete",
-        help="Leave out participants missing a planned cell (listed in the report); without "
-             "it they are refused."),
+        help="Leave participants out of the outcomes whose planned cells they miss (listed in "
+             "the report); without it they are refused."),
     power_sims: int = typer.Option(
-        200, "--power-sims", min=0, callback=whole_number,
+        200, "--power-sims", callback=_power_sims,
         help="Simulated studies per step of the smallest-detectable-effect search in the "
-             "report (0: leave it out)."),
+             "report: 0 (leave it out) or 10 to 1,000,000."),
     seed: int = typer.Option(0, "--seed", min=0, callback=whole_number,
                              help="Seed of the bootstrap and the power simulation."),
     force: bool = force_option(),
 ) -> None:
-    """Analyse a study's answers: write results.csv (one row per test), the tables, Figures 7,
-    10, 11 and 12 as PNG and SVG, and a self-contained report.html."""
+    """Analyse a study's answers into a report folder.
+
+    Writes results.csv (one row per test), the tables, the paper's Figures 7, 10, 11 and 12 as
+    PNG and SVG, and a self-contained report.html.
+    """
+    from realpen.io.files import check_readable_file
     from realpen.stats.analyses import AnalysisOptions, analyse
     from realpen.stats.data import read_trials
-    from realpen.stats.outputs import write_report_folder
+    from realpen.stats.outputs import check_report_folder, write_report_folder
     from realpen.study.design import load_design
 
     options = AnalysisOptions(paper_compatible=paper_compatible, wilcoxon_method=wilcoxon,
                               adjust=adjust, friedman_variant=friedman_blocks,
                               likert_ci=likert_ci, exclude_incomplete=exclude_incomplete,
                               seed=seed)
-    check_outputs(output, force=force, folders=True, inputs={"trials CSV": trials})
+    check_readable_file(trials)
+    check_outputs(output, force=force, folders=True,
+                  inputs={"trials CSV": trials, **design_input(design)})
+    check_report_folder(output, replace=force)
     loaded = load_design(design)
-    analysis = analyse(read_trials(trials, loaded), options)
-    if power_sims:
-        from realpen.stats.power import report_power
+    with terminate_as_interrupt():
+        with working("analysing"):
+            analysis = analyse(read_trials(trials, loaded), options)
+        if power_sims:
+            from realpen.stats.power import report_power
 
-        participants_seen = analysis.participants["participant"].nunique()
-        with progress_bar("power") as progress:
-            analysis.power = report_power(participants_seen, loaded, sims=power_sims, seed=seed,
-                                          progress=progress)
-    for participant, reason in analysis.excluded.items():
-        print(f"realpen: warning: participant {participant} excluded: {reason}", file=sys.stderr)
-    written = write_report_folder(analysis, output)
+            participants_seen = analysis.participants["participant"].nunique()
+            with progress_bar("power") as progress:
+                analysis.power = report_power(participants_seen, loaded, sims=power_sims,
+                                              seed=seed, progress=progress)
+        for participant, reason in analysis.excluded.items():
+            print(f"realpen: warning: participant {participant} partly excluded: {reason}",
+                  file=sys.stderr)
+        with working("writing the report"):
+            written = write_report_folder(analysis, output)
     tests = len(analysis.results)
     console.print(f"wrote {output}: {tests} tests of {analysis.design} in results.csv, "
                   f"{len(written)} files; open {output / 'report.html'}")
@@ -147,8 +178,8 @@ def power(
              "units of a participant's latent rating."),
     rates: str | None = typer.Option(
         None, "--rates",
-        help="Recognition rates per modality, e.g. tactile=0.43,auditory=0.51,"
-             "audio-tactile=0.63 (default: the paper's)."),
+        help="Recognition rates for every modality of the design, e.g. tactile=0.43,"
+             "auditory=0.51,audio-tactile=0.63 (default: the paper's)."),
     sims: int = typer.Option(2000, "--sims", min=10, callback=whole_number,
                              help="Simulated studies per number of participants."),
     seed: int = typer.Option(0, "--seed", min=0, callback=whole_number,
@@ -157,12 +188,15 @@ def power(
                                      help="Also draw power against participants (.png or .svg)."),
     force: bool = force_option(),
 ) -> None:
-    """Simulate a design before running it: the power of its main tests (p < 0.05) for each
-    number of participants."""
+    """Power before a study: how often its main tests find the effect.
+
+    Simulates the design and prints, for each number of participants, the share of simulated
+    studies in which each main test gives p < 0.05.
+    """
     from realpen.stats.power import power_lines, power_table, response_model
     from realpen.study.design import load_design
 
-    check_outputs(plot, force=force)
+    check_outputs(plot, force=force, inputs=design_input(design))
     if plot is not None:
         from realpen.display.study_figures import image_kind
 
@@ -186,29 +220,33 @@ def simulate(
     participants: int = typer.Option(..., "--participants", "-n", min=1, callback=whole_number,
                                      help="How many simulated participants (S01, S02, ...)."),
     output: Path = typer.Option(..., "-o", "--output",
-                                help="The trials CSV to write (the format of `realpen study "
-                                     "export`)."),
+                                help="The trials CSV to write: the columns `realpen stats` "
+                                     "reads (with --store, the store's full export)."),
     store: str | None = typer.Option(
         None, "--store",
-        help="Enter every answer through the study service into this new store (an SQLite file "
-             "or a postgresql:// URL) and write its export, as a real study would."),
+        help="Enter every answer through the study service into this store (an SQLite file or "
+             "a postgresql:// URL) that holds no session of the design yet, and write its "
+             "export, as a real study would."),
     effect: float = typer.Option(0.5, "--effect",
                                  help="Rating effect in latent SDs between the highest and the "
                                       "lowest level."),
     rates: str | None = typer.Option(None, "--rates",
-                                     help="Recognition rates per modality, e.g. tactile=0.43,"
-                                          "auditory=0.51 (default: the paper's)."),
+                                     help="Recognition rates for every modality of the design, "
+                                          "e.g. tactile=0.43,auditory=0.51,audio-tactile=0.63 "
+                                          "(default: the paper's)."),
     seed: int = typer.Option(0, "--seed", min=0, callback=whole_number,
                              help="Seed of the answers (plans use the design's seed)."),
     force: bool = force_option(),
 ) -> None:
-    """Simulated participants answering a design's plan: data to try the analysis on before a
-    study (`realpen stats DESIGN trials.csv -o report`)."""
+    """Simulated participants answering a design's plan.
+
+    Data to try the analysis on before a study: `realpen stats DESIGN trials.csv -o report`.
+    """
     from realpen.stats.power import response_model
     from realpen.stats.simulate import simulate_store, simulated_trials, write_simulated
     from realpen.study.design import load_design
 
-    check_outputs(output, force=force)
+    check_outputs(output, force=force, inputs=design_input(design))
     loaded = load_design(design)
     model = response_model(effect=effect, rates=rates)
     if store is None:
@@ -219,7 +257,7 @@ def simulate(
 
         file = store_file(store)
         check_outputs(output, sidecar_path(output), force=force,
-                      inputs={} if file is None else {"store": file})
+                      inputs={**design_input(design), **({} if file is None else {"store": file})})
         simulate_store(loaded, participants, store, model=model, seed=seed)
         export_trials(store, output, design=loaded.name)
     console.print(f"wrote {output}: {participants} simulated participant"

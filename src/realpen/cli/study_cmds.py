@@ -15,17 +15,11 @@ from pathlib import Path
 import typer
 
 from realpen.cli import sub_app
-from realpen.cli.common import check_outputs, console, force_option, whole_number
+from realpen.cli.common import check_outputs, console, design_input, force_option, whole_number
 
 study_app = sub_app("study", "User studies: designs, counterbalanced plans, export of the answers.")
 
 DESIGN_HELP = "A built-in design (study1, study2) or a design file (.yaml, .yml, .json)."
-
-
-def _design_input(design: str) -> dict[str, Path | None]:
-    """The design file as an input that no output may replace (a built-in name is none)."""
-    path = Path(design) if design.strip() else None
-    return {"design": path if path is not None and path.exists() else None}
 
 
 @study_app.command("plan")
@@ -51,7 +45,7 @@ def plan(
     from realpen.study.design import load_design
     from realpen.study.plan import balance, plan_lines, write_plan_csv
 
-    check_outputs(csv_out, force=force, inputs=_design_input(design))
+    check_outputs(csv_out, force=force, inputs=design_input(design))
     loaded = load_design(design)
     lines = plan_lines(loaded, participants, seed=seed, every_trial=trials)
     result = balance(loaded, participants, seed=seed)

@@ -937,10 +937,12 @@ def _file_stem(name: str) -> str:
 def study_figure_names(analysis) -> list[str]:
     """The names (file stems) of every figure that applies to ``analysis``, in report order.
 
-    ``figure7`` (Likert outcomes over ``condition``), ``figure10`` (a confusion table),
-    ``figure11`` (``log_rt`` over ``modality:pen``), ``figure12`` (Likert outcomes over
-    ``modality``), ``means-<outcome>`` (designs other than study1 and study2, one per outcome),
-    ``participants-<outcome>`` (one per outcome with participant values) and ``power``.
+    For the paper's designs (study1, study2): ``figure7`` (Likert outcomes over
+    ``condition``), ``figure10`` (a confusion table), ``figure11`` (``log_rt`` over
+    ``modality:pen``), ``figure12`` (Likert outcomes over ``modality``). For any other design:
+    ``confusion`` and ``response-times`` (the same drawings without the paper's numbers) and
+    ``means-<outcome>`` (one per outcome). For all: ``participants-<outcome>`` (one per outcome
+    with participant values) and ``power``.
 
     Examples:
         >>> import pandas as pd
@@ -991,29 +993,34 @@ def _figure_plan(analysis) -> list[tuple[str, object, str]]:
     cells = analysis.cells
     has_cells = isinstance(cells, pd.DataFrame) and len(cells) > 0
     shift = f"shifted by at most ±{LIKERT_JITTER:g} points so that tied answers stay visible"
+    # The paper's figure numbers name the paper's figures only: another design's figures are
+    # named by what they show (and its rating means are the means-* figures).
+    paper = analysis.design in ("study1", "study2")
     if has_cells:
         cells = _cells(analysis)
         likert = _outcomes(cells, factor="condition", unit=LIKERT_UNIT)
-        if likert:
+        if likert and paper:
             plan.append(("figure7", lambda: figure7(analysis),
                          f"Figure 7. {', '.join(_outcome_label(analysis, o) for o in likert)}: "
                          f"mean rating per condition with its {_ci_words(cells, likert)}; "
                          f"grey lines: each participant's answers, {shift}."))
     if analysis.confusion is not None and len(analysis.confusion):
-        plan.append(("figure10", lambda: figure10(analysis),
-                     "Figure 10. Confusion matrix per modality: rows the pen presented, columns "
+        plan.append(("figure10" if paper else "confusion", lambda: figure10(analysis),
+                     ("Figure 10. " if paper else "")
+                     + "Confusion matrix per modality: rows the pen presented, columns "
                      "the pen chosen; each cell gives the count of answers and its percentage "
                      "of the row (the colour, on one scale for all panels); outlined: correct "
                      "answers."))
     if has_cells:
         if RT_OUTCOME in _outcomes(cells, factor="modality:pen"):
-            plan.append(("figure11", lambda: figure11(analysis),
-                         "Figure 11. Response time (ms) per modality × pen: the geometric mean "
+            plan.append(("figure11" if paper else "response-times", lambda: figure11(analysis),
+                         ("Figure 11. " if paper else "")
+                         + "Response time (ms) per modality × pen: the geometric mean "
                          "over participants (exp of the mean of each participant's mean log "
                          f"RT) with its {_ci_words(cells, [RT_OUTCOME])}, exp-transformed; "
                          "faint dots: each participant."))
         items = _outcomes(cells, factor="modality", unit=LIKERT_UNIT, known=QUESTIONNAIRE)
-        if items:
+        if items and paper:
             single = [item for item in items if
                       cells.loc[(cells["outcome"] == item) & (cells["factor"] == "modality"),
                                 "level"].nunique() == 1]

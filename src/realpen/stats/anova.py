@@ -241,7 +241,10 @@ def _contrast_decomposition(wide: pd.DataFrame) -> dict[tuple[int, ...], dict[st
         entry = {"ss": float(n * mean @ mean), "ss_error": float((deviations**2).sum())}
         if effect:
             cov = deviations.T @ deviations / (n - 1)
-            eps = 1.0 if d <= 1 else float(min(np.trace(cov) ** 2 / (d * np.trace(cov @ cov)), 1.0))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                # No variation at all gives 0/0: epsilon is undefined (NaN), said by the caller.
+                eps = 1.0 if d <= 1 else float(min(np.trace(cov) ** 2 / (d * np.trace(cov @ cov)),
+                                                   1.0))
             w, p = (math.nan, math.nan) if d <= 1 else _mauchly(cov, n - 1, cells)
             entry.update(eps_gg=eps, eps_hf=_hf_from_gg(eps, n, d), mauchly_w=w, p_mauchly=p)
         out[effect] = entry

@@ -17,6 +17,7 @@ problem.
 
 from __future__ import annotations
 
+import csv
 import math
 import os
 from dataclasses import dataclass, field
@@ -107,20 +108,12 @@ def read_trials(path: str | os.PathLike, design: Design) -> Trials:
     source = str(path)
     check_readable_file(path)
     check_size(path, MAX_CSV_BYTES, "CSV files")
-    try:
-        frame = pd.read_csv(path, dtype=str, keep_default_na=False, na_filter=False,
-                            encoding="utf-8")
-    except UnicodeDecodeError:
-        raise fail(source, "is not UTF-8 text (a trials CSV from `realpen study export`)") from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as error:
-        reason = " ".join(str(error).split())[:200]
-        raise fail(source, f"is not a readable CSV file ({reason})") from None
+    frame = _read_csv(path, source)
     missing = [column for column in KEY_COLUMNS if column not in frame.columns]
     if missing:
         raise fail(source, f"missing column{'s' if len(missing) > 1 else ''} "
                            f"{', '.join(missing)} (a trials CSV from `realpen study export` "
                            f"starts with {', '.join(KEY_COLUMNS)})")
-    frame["line"] = np.arange(len(frame)) + 2  # the header is line 1
     studies = sorted(set(frame["study"]))
     frame = frame[frame["study"] == design.name]
     if frame.empty:
@@ -146,6 +139,36 @@ def read_trials(path: str | os.PathLike, design: Design) -> Trials:
     analysed = frame[frame["phase"].isin(_ANALYSED_PHASES)]
     return Trials(frame=analysed.reset_index(drop=True), training=training.reset_index(drop=True),
                   design=design, source=source, participants=participants)
+
+
+def _read_csv(path: str | os.PathLike, source: str) -> pd.DataFrame:
+    """Every record as text, with ``line``: the file line it starts on (a quoted answer may
+    span lines, so records and lines differ)."""
+    try:
+        with open(path, newline="", encoding="utf-8") as handle:
+            reader = csv.reader(handle)
+            header = next(reader, None)
+            if not header:
+                raise fail(source, "has no header line (a trials CSV from `realpen study export`)")
+            if len(set(header)) != len(header):
+                raise fail(source, "line 1: a column name appears twice")
+            records, lines = [], []
+            start = reader.line_num + 1
+            for record in reader:
+                if record:
+                    if len(record) != len(header):
+                        raise fail(source, f"line {start}: {len(record)} fields, the header has "
+                                           f"{len(header)}")
+                    records.append(record)
+                    lines.append(start)
+                start = reader.line_num + 1
+    except UnicodeDecodeError:
+        raise fail(source, "is not UTF-8 text (a trials CSV from `realpen study export`)") from None
+    except csv.Error as error:
+        raise fail(source, f"is not a readable CSV file ({error})") from None
+    frame = pd.DataFrame(records, columns=header, dtype=str)
+    frame["line"] = lines
+    return frame
 
 
 def _check_keys(source: str, frame: pd.DataFrame) -> None:

@@ -517,12 +517,17 @@ def response_model(*, effect: float = 0.0, rates: str | None = None) -> Response
 
 def power_lines(table: pd.DataFrame) -> list[str]:
     """:func:`power_table`'s rows as aligned text lines for a terminal."""
-    header = f"{'outcome':<12} {'test':<9} {'factor':<10} {'effect':>7} {'participants':>12} " \
+    header = f"{'outcome':<12} {'test':<9} {'factor':<10} {'effect':>14} {'participants':>12} " \
              f"{'power':>6}"
     lines = [header]
     for row in table.itertuples(index=False):
-        lines.append(f"{row.outcome:<12} {row.test:<9} {row.effect:<10} {row.effect_size:>7.3g} "
+        unit = "SD" if row.test == _TESTS["likert"] else "rate diff"
+        effect = f"{row.effect_size:.3g} {unit}"
+        lines.append(f"{row.outcome:<12} {row.test:<9} {row.effect:<10} {effect:>14} "
                      f"{row.participants:>12d} {row.power:>6.3f}")
+    lines.append("effect: for ratings, the difference between the highest and the lowest level "
+                 "in SDs of a participant's latent rating; for recognition, the highest minus "
+                 "the lowest rate")
     lines.append(f"power: the share of {int(table['sims'].iloc[0])} simulated studies with "
                  f"p < {ALPHA:g}; Monte Carlo SE about sqrt(power (1 - power) / sims)")
     return lines

@@ -220,7 +220,8 @@ def _data_section(analysis) -> str:
                          f"(results.csv).</p>")
     excluded = analysis.excluded or {}
     if excluded:
-        parts.append(f"<p>Excluded: {len(excluded)} participant"
+        parts.append(f"<p>Left out of the outcomes whose planned cells they miss (and kept in "
+                     f"the others): {len(excluded)} participant"
                      f"{'s' if len(excluded) != 1 else ''}.</p>")
         parts.append(_table(("participant", "reason"),
                             [(_e(code), _e(reason)) for code, reason in excluded.items()]))

@@ -207,8 +207,8 @@ def check_inputs(design: Design, participants: int, model: ResponseModel, seed: 
             asked = question.modalities or design.modalities
             missing = [m for m in asked if m in design.modalities and m not in model.rates]
             if missing:
-                raise ParameterError("model", f"rates has no recognition rate for the modality "
-                                              f"{missing[0]!r} of {design.name!r} (it has "
+                raise ParameterError("rates", f"no recognition rate for the modality "
+                                              f"{missing[0]!r} of {design.name!r} (given: "
                                               f"{', '.join(model.rates) or 'none'})")
 
 
@@ -358,6 +358,11 @@ def simulate_store(design: Design, participants: int, store: str | os.PathLike, 
     shown = hide_password(store)
     cache = service.DesignCache()
     stored = 0
+    try:
+        _check_no_sessions(database, design, shown)
+    except BaseException:
+        database.close()
+        raise
 
     def run(operation, *args):
         # One transaction per operation, committed before the next: as the live routes do.
@@ -390,6 +395,22 @@ def simulate_store(design: Design, participants: int, store: str | os.PathLike, 
     finally:
         database.close()
     return stored
+
+
+def _check_no_sessions(database, design: Design, shown: str) -> None:
+    """Simulated answers never join a store's real ones: refuse a store that holds any
+    session of the design."""
+    from sqlalchemy import func, select
+
+    from realpen.study.tables import sessions, studies
+
+    with database.engine.connect() as conn:
+        count = conn.execute(select(func.count()).select_from(sessions.join(
+            studies, sessions.c.study_id == studies.c.id)).where(
+            studies.c.name == design.name)).scalar_one()
+    if count:
+        raise fail(shown, f"already holds {count} session{'s' if count != 1 else ''} of "
+                          f"{design.name!r}; simulate into a store without them (a new file)")
 
 
 def write_simulated(frame: pd.DataFrame, target: str | os.PathLike) -> None:

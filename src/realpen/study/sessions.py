@@ -35,7 +35,8 @@ from realpen.study.tables import SESSION_STATES, answers, participants, sessions
 
 __all__ = ["StudyError", "storable", "SessionRequest", "DesignCache", "LIVE_MODALITY", "MAX_RT_MS",
            "MAX_CODE_CHARS", "open_session", "next_trial", "answer_trial", "progress",
-           "list_sessions", "set_state", "trial_plan", "trial_exists", "pen_profile", "design_summary", "now"]
+           "list_sessions", "set_state", "trial_plan", "trial_exists", "trial_answered", "pen_profile",
+           "design_summary", "now"]
 
 # The study modality names are the statistics' (``audio-tactile``); the live page's WebSocket
 # protocol calls the same output ``auditory-tactile``.
@@ -316,6 +317,12 @@ def trial_plan(conn: Connection, session_id: int, n: int,
     return _planned(plan), cache.get(conn, row["study_id"])
 
 
+def trial_answered(conn: Connection, session_id: int, n: int) -> bool:
+    """Whether trial ``n`` of the session holds an answer (as this statement sees the store)."""
+    return conn.execute(select(trials.c.answered_at).where(
+        trials.c.session_id == session_id, trials.c.n == n)).scalar() is not None
+
+
 def trial_exists(conn: Connection, session_id: int, n: int) -> bool:
     """Whether study session ``session_id`` has a trial ``n`` (a stroke may name it)."""
     return conn.execute(select(trials.c.n).where(trials.c.session_id == session_id,
@@ -436,6 +443,11 @@ def answer_trial(conn: Connection, session_id: int, n: int, given: dict, rt_ms: 
         raise StudyError(409, f"session {session_id} is finished")
     expected = _first_unanswered(conn, session_id)
     if expected != n:
+        # Another server may have answered trial n since it was read above (PostgreSQL reads
+        # each statement's own snapshot): say so, with the stored answer, as for a retry.
+        if trial_answered(conn, session_id, n):
+            raise StudyError(409, f"trial {n} of session {session_id} is answered already",
+                             **_stored_answer(conn, session_id, n))
         raise StudyError(409, f"trial {n} is not the next one of session {session_id} (next: "
                               f"{expected})", next=expected)
     if isinstance(rt_ms, bool) or not isinstance(rt_ms, int | float) or not math.isfinite(rt_ms) \
