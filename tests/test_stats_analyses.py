@@ -18,7 +18,7 @@ from conftest import assert_clean_failure, run_cli
 from scipy import stats as scipy_stats
 
 from realpen.errors import RealPenError
-from realpen.stats.analyses import AnalysisOptions, analyse
+from realpen.stats.analyses import AnalysisOptions, IncompleteError, analyse
 from realpen.stats.data import cell_values, outcomes, read_trials
 from realpen.stats.results import RESULT_COLUMNS
 from realpen.stats.simulate import ResponseModel, simulated_trials
@@ -216,9 +216,11 @@ def test_a_participant_missing_a_cell_is_refused_or_excluded_and_listed(study1_c
     path = edited(study1_csv, tmp_path / "t.csv", lambda records: [
         r for r in records if not (r["participant"] == "S03" and r["condition"] == "E"
                                    and r["question"] == "Q1")])
-    with pytest.raises(RealPenError, match=r"t\.csv: participant S03: no answer to Q1 in "
-                                           r"condition E; rerun with --exclude-incomplete"):
+    with pytest.raises(IncompleteError, match=r"t\.csv: participant S03: no answer to Q1 in "
+                                              r"condition E$"):
         analyse(read_trials(path, STUDY1))
+    refused = run_cli("stats", "study1", str(path), "-o", str(tmp_path / "r"))
+    assert_clean_failure(refused, "condition E; rerun with --exclude-incomplete")
     analysis = analyse(read_trials(path, STUDY1), AnalysisOptions(exclude_incomplete=True))
     assert analysis.excluded == {"S03": "no answer to Q1 in condition E (left out of Q1)"}
     # left out of the outcome it misses only
@@ -368,7 +370,7 @@ def test_only_a_report_folder_is_ever_replaced(tmp_path, monkeypatch):
     assert check_report_folder(empty, replace=True) == empty
     with pytest.raises(RealPenError, match="thesis: is a folder no report made"):
         check_report_folder(foreign, replace=True)
-    with pytest.raises(RealPenError, match="report: exists; pass --force"):
+    with pytest.raises(RealPenError, match="report: exists; it is replaced only when"):
         check_report_folder(report, replace=False)
     with pytest.raises(RealPenError, match="holds the current folder"):
         check_report_folder(Path("."), replace=True)

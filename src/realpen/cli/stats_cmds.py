@@ -24,6 +24,7 @@ from realpen.cli.common import (
     whole_number,
     working,
 )
+from realpen.errors import RealPenError
 
 try:  # recent typer releases carry their own copy of click
     from typer.core import TyperGroup
@@ -130,7 +131,7 @@ def report(
     PNG and SVG, and a self-contained report.html.
     """
     from realpen.io.files import check_readable_file
-    from realpen.stats.analyses import AnalysisOptions, analyse
+    from realpen.stats.analyses import AnalysisOptions, IncompleteError, analyse
     from realpen.stats.data import read_trials
     from realpen.stats.outputs import check_report_folder, write_report_folder
     from realpen.study.design import load_design
@@ -146,7 +147,11 @@ def report(
     loaded = load_design(design)
     with terminate_as_interrupt():
         with working("analysing"):
-            analysis = analyse(read_trials(trials, loaded), options)
+            try:
+                analysis = analyse(read_trials(trials, loaded), options)
+            except IncompleteError as error:
+                raise RealPenError(f"{error}; rerun with --exclude-incomplete to leave incomplete "
+                                   f"participants out of the outcomes they miss") from None
         if power_sims:
             from realpen.stats.power import report_power
 

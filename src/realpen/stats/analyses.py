@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pandas as pd
 
-from realpen.errors import ParameterError, fail
+from realpen.errors import ParameterError, RealPenError, fail
 from realpen.stats.anova import pairwise, rm_anova
 from realpen.stats.data import Outcome, Trials, cell_values, outcomes
 from realpen.stats.intervals import cell_cis
@@ -38,8 +38,8 @@ from realpen.stats.paper import paper_numbers
 from realpen.stats.results import RESULT_COLUMNS, with_context
 from realpen.stats.texts import methods_paragraphs
 
-__all__ = ["AnalysisOptions", "analyse", "FRIEDMAN_VARIANTS", "WILCOXON_METHODS", "ADJUSTMENTS",
-           "CI_METHODS", "SUPERPOSITION", "FLUCTUATION"]
+__all__ = ["AnalysisOptions", "analyse", "IncompleteError", "FRIEDMAN_VARIANTS",
+           "WILCOXON_METHODS", "ADJUSTMENTS", "CI_METHODS", "SUPERPOSITION", "FLUCTUATION"]
 
 FRIEDMAN_VARIANTS = {
     "average": "(a) each participant's mean over the other factor's levels: one block per "
@@ -63,6 +63,11 @@ _PAPER_PSEUDO = ("paper-compatible: the repetitions of each participant treated 
                  "imply; not recommended: repetitions of one person are not independent, so "
                  "the degrees of freedom are inflated and the p-values too small "
                  "(pseudo-replication, Hurlbert 1984)")
+
+
+class IncompleteError(RealPenError):
+    """A participant misses a planned cell and ``exclude_incomplete`` is off; the message
+    names the file, the participant and the cell (the caller says how to go on)."""
 
 
 @dataclass(frozen=True)
@@ -104,9 +109,9 @@ def analyse(trials: Trials, options: AnalysisOptions = AnalysisOptions()) -> Stu
     """Run every analysis of ``trials``' design.
 
     Raises:
-        RealPenError: a participant misses a planned cell (without ``exclude_incomplete``;
-            the line names the file, the participant and the cell), or fewer than two complete
-            participants remain.
+        IncompleteError: a participant misses a planned cell (without
+            ``exclude_incomplete``; the line names the file, the participant and the cell).
+        RealPenError: fewer than two participants are complete in an outcome.
     """
     design = trials.design
     found = outcomes(design)
@@ -124,9 +129,7 @@ def analyse(trials: Trials, options: AnalysisOptions = AnalysisOptions()) -> Stu
     if incomplete and not options.exclude_incomplete:
         participant, reasons = next(iter(incomplete.items()))
         more = f" ({len(incomplete) - 1} more incomplete)" if len(incomplete) > 1 else ""
-        raise fail(trials.source, f"participant {participant}: {reasons[0]}{more}; rerun with "
-                                  f"--exclude-incomplete to leave incomplete participants out "
-                                  f"of the outcomes they miss")
+        raise IncompleteError(f"{trials.source}: participant {participant}: {reasons[0]}{more}")
     parts: list[pd.DataFrame] = []
     cells: list[pd.DataFrame] = []
     lines: list[pd.DataFrame] = []

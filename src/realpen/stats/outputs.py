@@ -56,11 +56,11 @@ def check_report_folder(folder: str | os.PathLike, *, replace: bool) -> Path:
         raise fail(target, "is not a folder; name a folder for the report")
     if target.exists():
         if not replace:
-            raise fail(target, "exists; pass --force to replace it")
+            raise fail(target, "exists; it is replaced only when that is asked for")
         contents = list(target.iterdir())
         if contents and not (target / MARKER).is_file():
-            raise fail(target, f"is a folder no report made (it has no {MARKER}); it is not "
-                               f"replaced even with --force: name a new folder")
+            raise fail(target, f"is a folder no report made (it has no {MARKER}); it is never "
+                               f"replaced: name a new folder")
     parent = resolved.parent
     if not parent.is_dir():
         raise fail(target, f"its parent folder {parent} does not exist")
