@@ -28,9 +28,11 @@ from conftest import assert_clean_failure, run_cli
 from test_hatt import synthetic_xml
 
 from realpen.datasets.hatt import load_hatt, synthesize
+from realpen.dsp.limits import MAX_UNITS
 from realpen.errors import ParameterError, RealPenError
 from realpen.examples import example_recording_path
 from realpen.io import csvtable
+from realpen.io.blocks import MAX_STREAM_SAMPLES
 from realpen.io.csvtable import read_csv
 from realpen.io.files import riff_chunks
 from realpen.io.limits import (
@@ -444,8 +446,9 @@ def _long_field(tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("make, limit", [
-    (_npz_bomb, f"limited to {MAX_FRAMES:,} samples"),
-    (_long_wav, f"limited to {MAX_FRAMES:,} samples"),
+    # `analyze` streams: the streaming limit on samples, and on units (93 h of 100 ms units).
+    (_npz_bomb, f"limited to {MAX_STREAM_SAMPLES:,} samples"),
+    (_long_wav, f"an analysis takes at most {MAX_UNITS:,}"),
     (_long_field, f"CSV lines are limited to {MAX_CSV_LINE_CHARS:,}"),
 ])
 def test_worst_files_are_refused_in_one_line_under_the_memory_limit(tmp_path, make, limit):

@@ -2,7 +2,9 @@
 
 Lives here: :mod:`~realpen.dsp.filters` (axes to one, resampling, zero-phase high-pass,
 :func:`prepare`), :mod:`~realpen.dsp.spectrum` (unit sequences, principal frequencies, the
-choice of units), :mod:`~realpen.dsp.tracks` (frequency tracks across sub-patterns).
+choice of units), :mod:`~realpen.dsp.stream` (the same analysis streamed block by block, each
+unit's DFT321 from its axes' unit spectra), :mod:`~realpen.dsp.tracks` (frequency tracks
+across sub-patterns).
 
 May import: :mod:`realpen.errors`, :mod:`realpen.io`. Never a higher layer.
 """

@@ -9,11 +9,12 @@ several of the N places.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import json
+import textwrap
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 from scipy.ndimage import maximum_filter1d
 
 from realpen.dsp.limits import (
@@ -27,7 +28,7 @@ from realpen.dsp.limits import (
 from realpen.errors import ParameterError, RealPenError, require_choice, require_number
 
 __all__ = ["Analysis", "analyze", "principal_frequencies", "select_units", "fft_size",
-           "require_count", "unit_samples_for",
+           "require_count", "unit_samples_for", "band_edges_for",
            "ProgressCallback", "SELECTIONS", "FEATURE_BANDS", "PEAK_FLOOR_DB"]
 
 ProgressCallback = Callable[[int, int], None]
@@ -47,6 +48,8 @@ class Analysis:
         top: how many principal frequencies were asked for per unit.
         starts_s: start time of each unit in seconds, shape (units,).
         frequencies_hz: shape (units, top), strongest first; NaN where a unit has fewer peaks.
+            float64, or float32 from a streamed analysis (:mod:`realpen.dsp.stream`), as are
+            ``powers`` and ``band_levels_db``.
         powers: mean-square power of each peak (signal unit squared), same shape; NaN likewise.
             A sinusoid of amplitude A has power A²/2.
         band_levels_db: levels of 24 equal-width bands between fmin and fmax per unit, in dB re
@@ -78,12 +81,32 @@ class Analysis:
 
     def to_json(self) -> dict:
         """The JSON report of ``realpen analyze``."""
-        units = []
-        for index, start in enumerate(self.starts_s):
-            freqs, powers = self.unit(index)
-            units.append({"start_s": round(float(start), 6),
-                          "frequencies_hz": [round(float(f), 4) for f in freqs],
-                          "powers": [float(p) for p in powers]})
+        return self._report([self._unit_report(index) for index in range(len(self.starts_s))])
+
+    def json_chunks(self) -> Iterator[str]:
+        """The text of :func:`realpen.io.files.json_text` of :meth:`to_json`, a unit at a time.
+
+        A day of 100 ms units is 867 k of them: as one document of Python objects it would take
+        over a gigabyte, written this way no more than one unit's.
+        """
+        head = json.dumps(self._report([]), indent=2, allow_nan=False)
+        before, after = head.split('"units": []', 1)
+        yield before + '"units": ['
+        for index in range(len(self.starts_s)):
+            unit = json.dumps(self._unit_report(index), indent=2, allow_nan=False)
+            yield ("\n" if index == 0 else ",\n") + textwrap.indent(unit, "    ")
+        yield ("\n  ]" if len(self.starts_s) else "]") + after + "\n"
+
+    def _unit_report(self, index: int) -> dict:
+        freqs, powers = self.unit(index)
+        # A streamed analysis may keep its values as float32: written with the shortest digits
+        # that read back as the same float32, not as the float64 that holds it.
+        number = (lambda v: float(str(v))) if self.powers.dtype == np.float32 else float
+        return {"start_s": round(float(self.starts_s[index]), 6),
+                "frequencies_hz": [round(float(f), 4) for f in freqs],
+                "powers": [number(p) for p in powers]}
+
+    def _report(self, units: list) -> dict:
         unit_samples = int(round(self.unit_ms * self.rate / 1000.0))
         # Units are whole samples: 100 ms at 1344 Hz is 134 samples (99.70 ms).
         return {"rate": self.rate, "unit_ms": self.unit_ms, "unit_samples": unit_samples,
@@ -158,6 +181,8 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
             :data:`~realpen.dsp.limits.MAX_UNITS` units (parameter ``unit_ms``, naming
             ``source``).
     """
+    from scipy import signal  # here: the streamed analysis imports this module without it
+
     require_number("rate", rate, minimum=0.0, inclusive=False)
     require_number("unit_ms", unit_ms, minimum=0.0, inclusive=False)
     top = require_count("top", top, MAX_TOP)
@@ -172,7 +197,7 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
     separation = 1000.0 / unit_ms if min_separation_hz is None else min_separation_hz
     half_width = max(1, int(round(separation / bin_hz)))
     in_band = (freqs >= fmin) & (freqs <= fmax)
-    band_edges = np.searchsorted(freqs, np.linspace(fmin, fmax, FEATURE_BANDS + 1)[:-1])
+    band_edges = band_edges_for(freqs, fmin, fmax)
     window = signal.get_window("hann", unit_samples)
     scale = 2.0 / window.sum() ** 2  # |X|² → mean-square power of a sinusoid (A²/2)
 
@@ -192,12 +217,27 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
         peaks_f = np.clip(peaks_f, fmin, fmax)
         out_freqs[first:first + len(block)] = peaks_f
         out_powers[first:first + len(block)] = peaks_p
-        band_power = np.add.reduceat(power[:, in_band.argmax():], band_edges - in_band.argmax(),
-                                     axis=1) if in_band.any() else np.zeros((len(block), 1))
-        bands[first:first + len(block)] = 10 * np.log10(band_power[:, :FEATURE_BANDS] + _TINY)
+        bands[first:first + len(block)] = _band_levels_db(power, in_band, band_edges)
         if progress is not None:
             progress(min(first + chunk, count), count)
     return starts, out_freqs, out_powers, bands
+
+
+def band_edges_for(freqs: np.ndarray, fmin: float, fmax: float) -> np.ndarray:
+    """The first bin of each of the :data:`FEATURE_BANDS` equal-width bands between ``fmin``
+    and ``fmax`` (Hz) on the bin frequencies ``freqs``."""
+    return np.searchsorted(freqs, np.linspace(fmin, fmax, FEATURE_BANDS + 1)[:-1])
+
+
+def _band_levels_db(power: np.ndarray, in_band: np.ndarray, band_edges: np.ndarray
+                    ) -> np.ndarray:
+    """Band levels in dB of each row of ``power``: the sum of its bins from each band's first
+    bin (``band_edges``) to the next band's (the last band: to the end of the row)."""
+    if not in_band.any():
+        return np.full((len(power), FEATURE_BANDS), 10 * np.log10(_TINY))
+    first = int(in_band.argmax())
+    band_power = np.add.reduceat(power[:, first:], band_edges - first, axis=1)
+    return 10 * np.log10(band_power[:, :FEATURE_BANDS] + _TINY)
 
 
 def _check_units(units: int, unit_ms: float, source: object) -> None:
@@ -209,24 +249,65 @@ def _check_units(units: int, unit_ms: float, source: object) -> None:
                                         f"or a shorter recording")
 
 
+def _neighbourhood_max(power: np.ndarray, half_width: int) -> np.ndarray:
+    """The largest power within ± ``half_width`` bins of each bin (powers are ≥ 0, so the edges
+    need no padding value)."""
+    if half_width > 3:
+        return maximum_filter1d(power, size=2 * half_width + 1, axis=1, mode="constant",
+                                cval=0.0)
+    # A few shifted maxima are cheaper than the filter for the narrow neighbourhoods of short
+    # padded spectra (the streamed analysis's 129 bins have a half-width of 2).
+    out = power.copy()
+    for shift in range(1, half_width + 1):
+        np.maximum(out[:, shift:], power[:, :-shift], out=out[:, shift:])
+        np.maximum(out[:, :-shift], power[:, shift:], out=out[:, :-shift])
+    return out
+
+
 def _top_peaks(power: np.ndarray, in_band: np.ndarray, half_width: int, top: int,
-               bin_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Strongest ``top`` peaks per row with parabolic (log-power) sub-bin interpolation."""
+               bin_hz: float, weight: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Strongest ``top`` peaks per row with parabolic (log-power) sub-bin interpolation.
+
+    ``power`` is (rows, bins) of non-negative powers. A peak is a bin that rises from its left
+    neighbour, is the largest within ± ``half_width`` bins, lies in ``in_band`` and is above
+    :data:`PEAK_FLOOR_DB` of the row's strongest bin. Returns (frequencies in Hz, powers), each
+    (rows, top), strongest first, NaN where a row has fewer peaks.
+
+    ``weight`` (bins,), when given, is a power response the peaks are judged by: the floor and
+    the order use ``power × weight``, while the peaks are found and interpolated in ``power``
+    and returned unweighted (the caller weights them at their interpolated frequency). A steep
+    response (a high-pass near its cutoff) would otherwise tilt a tone's window lobe and move
+    its peak.
+    """
     rows, bins = power.shape
-    neighbourhood = maximum_filter1d(power, size=2 * half_width + 1, axis=1, mode="constant",
-                                     cval=0.0)
-    rising = np.zeros_like(in_band, shape=power.shape)
-    rising[:, 1:] = power[:, 1:] > power[:, :-1]
-    strongest = power.max(axis=1, keepdims=True)
-    floor = np.maximum(strongest * 10 ** (PEAK_FLOOR_DB / 10), _TINY)
-    is_peak = (power >= neighbourhood) & rising & in_band[None, :] & (power > floor)
-    is_peak[:, 0] = is_peak[:, -1] = False
-    candidates = np.where(is_peak, power, -np.inf)
-    take = min(top, bins)
-    index = np.argpartition(-candidates, take - 1, axis=1)[:, :take]
-    order = np.argsort(-np.take_along_axis(candidates, index, axis=1), axis=1)
-    index = np.take_along_axis(index, order, axis=1)
-    valid = np.isfinite(np.take_along_axis(candidates, index, axis=1))
+    is_peak = power >= _neighbourhood_max(power, half_width)
+    is_peak[:, 1:] &= power[:, 1:] > power[:, :-1]
+    is_peak[:, 0] = False
+    is_peak &= in_band[None, :]
+    judged = power if weight is None else power * weight
+    strongest = judged.max(axis=1, keepdims=True)
+    is_peak &= judged > np.maximum(strongest * 10 ** (PEAK_FLOOR_DB / 10), _TINY)
+    is_peak[:, -1] = False
+    # Peaks are sparse (at most one in half_width + 1 bins): pack each row's peaks to the left
+    # so that the partial sort looks at a few dozen candidates instead of every bin.
+    row_of, column_of = np.nonzero(is_peak)
+    counts = np.bincount(row_of, minlength=rows)
+    width = max(int(counts.max(initial=0)), 1)
+    slot = np.arange(len(row_of)) - (np.cumsum(counts) - counts)[row_of]
+    candidates = np.full((rows, width), -np.inf)
+    candidates[row_of, slot] = judged[row_of, column_of]
+    columns = np.zeros((rows, width), dtype=np.intp)
+    columns[row_of, slot] = column_of
+    take = min(top, width)
+    if take < width:
+        pick = np.argpartition(-candidates, take - 1, axis=1)[:, :take]
+    else:
+        pick = np.broadcast_to(np.arange(width), (rows, width))
+    order = np.argsort(-np.take_along_axis(candidates, pick, axis=1), axis=1)
+    pick = np.take_along_axis(pick, order, axis=1)
+    valid = np.isfinite(np.take_along_axis(candidates, pick, axis=1))
+    index = np.take_along_axis(columns, pick, axis=1)
     row = np.arange(rows)[:, None]
     safe = np.clip(index, 1, bins - 2)
     alpha, beta, gamma = (10 * np.log10(power[row, safe + shift] + _TINY) for shift in (-1, 0, 1))

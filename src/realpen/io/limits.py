@@ -20,7 +20,8 @@ from pathlib import Path
 
 from realpen.errors import ParameterError, fail, require_number
 
-__all__ = ["MIN_RATE_HZ", "MAX_RATE_HZ", "MAX_CHANNELS", "MAX_FRAMES", "MAX_JSON_BYTES",
+__all__ = ["MIN_RATE_HZ", "MAX_RATE_HZ", "MAX_CHANNELS", "MAX_FRAMES", "MAX_STREAM_SAMPLES",
+           "MAX_JSON_BYTES",
            "MAX_JSON_DEPTH", "MAX_NUMBER_CHARS", "MAX_CSV_FIELD_CHARS", "MAX_CSV_LINE_CHARS",
            "MAX_CSV_BYTES", "MAX_NPZ_DIRECTORY_BYTES", "MAX_NPZ_ARRAY_BYTES",
            "MAX_SAMPLE_MAGNITUDE", "MAX_XML_BYTES", "MAX_MODEL_ORDER",
@@ -40,6 +41,11 @@ MAX_FRAMES = 2**26
 of one 1.344 kHz accelerometer axis, 4.6 h of three, 23 min of 48 kHz mono sound, 11.6 min of
 stereo). The analysis holds 50–100 bytes per sample at its peak, so no recording makes it use
 more than about 3–6 GB."""
+MAX_STREAM_SAMPLES = 2**30
+"""The most samples (frames × axes) a streamed recording may hold: 1,073,741,824, i.e. 74 h of a
+three-axis 1.344 kHz accelerometer (a day is 348 M) or 6.2 h of 48 kHz mono. Streaming keeps
+one block in memory, so this bounds the time a forged header can cost, not memory; an analysis
+also refuses more than :data:`realpen.dsp.limits.MAX_UNITS` units."""
 MAX_JSON_BYTES = 4 * 1024 * 1024
 """The largest JSON document read (bytes): a profile.json is a few kB."""
 MAX_JSON_DEPTH = 32

@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 import soundfile as sf
-from scipy.interpolate import CubicSpline
 
 from realpen.errors import ParameterError, fail
 from realpen.io.csvtable import read_csv
@@ -317,6 +316,8 @@ def _even_sampling(path: Path, name: str, times: np.ndarray, values: np.ndarray
     if np.max(np.abs(steps - step)) <= JITTER_TOLERANCE * step:
         return rate, values
     grid = times[0] + np.arange(int(np.floor((times[-1] - times[0]) / step)) + 1) * step
+    from scipy.interpolate import CubicSpline  # only for uneven sampling: heavy to import
+
     return rate, CubicSpline(times, values, axis=0)(grid)
 
 
