@@ -41,7 +41,14 @@ import numpy as np
 from realpen import __version__
 from realpen.errors import ParameterError, fail
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_pattern, check_span, sound_samples
+from realpen.exports.base import (
+    RESIDUAL_IN_ENVELOPE,
+    Export,
+    check_pattern,
+    check_span,
+    residual_limits,
+    sound_samples,
+)
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["SUFFIX", "MAX_CURVE_POINTS", "MAX_EVENT_S", "MAX_SOUND_EVENTS", "LIMITS", "build",
@@ -184,6 +191,7 @@ def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "p
                 if entry.get("Event", {}).get("EventType") == "HapticContinuous")
     summary = (f"{total * 1000:g} ms continuous event, {curves} parameter curves"
                + (f", {audio} AudioCustom events playing {file_name}" if audio else ""))
-    limits = LIMITS if audio else (*LIMITS[:2], NO_SOUND)
+    limits = (LIMITS if audio else (*LIMITS[:2], NO_SOUND)) \
+        + residual_limits(pattern, RESIDUAL_IN_ENVELOPE)
     return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
                   summary, {file_name: sound_wav(sound)} if audio else {}, limits)

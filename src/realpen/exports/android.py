@@ -37,7 +37,7 @@ import numpy as np
 
 from realpen import __version__
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_pattern, check_span
+from realpen.exports.base import RESIDUAL_IN_ENVELOPE, Export, check_pattern, check_span, residual_limits
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["SUFFIX", "KOTLIN_SUFFIX", "ENVELOPE_SEGMENTS", "MIN_POINT_MS", "GUARANTEED_POINTS",
@@ -210,4 +210,4 @@ def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "p
         what = "JSON with a Kotlin snippet"
     return Export(data, f"{what}: waveform of {steps} steps (loops), envelopes of "
                         f"{len(document['basic_envelope']['control_points'])} control points",
-                  limits=LIMITS)
+                  limits=LIMITS + residual_limits(pattern, RESIDUAL_IN_ENVELOPE))

@@ -13,7 +13,7 @@ from realpen.tactile.synthesis import MAX_RATE, MIN_RATE
 
 __all__ = ["Export", "MAX_REPEATS", "MAX_EXPORT_S", "MAX_EXPORT_FRAMES", "check_repeats",
            "check_span", "check_frames", "check_pattern", "sound_samples", "resample_loop",
-           "title"]
+           "title", "residual_limits", "RESIDUAL_IN_ENVELOPE", "RESIDUAL_NOT_CARRIED"]
 
 MAX_REPEATS = 100  # 150 s of a 1.5 s pattern; players loop, files need not
 MAX_EXPORT_S = 600.0
@@ -46,6 +46,29 @@ class Export:
     def __repr__(self) -> str:
         extra = f", companions {sorted(self.companions)}" if self.companions else ""
         return f"Export({len(self.data)} bytes{extra}: {self.summary[:120]})"
+
+
+RESIDUAL_IN_ENVELOPE = ("the residual noise ({bands} bands, {low:g}–{high:.0f} Hz) is felt only "
+                        "through the envelope: intensity and sharpness are measured from the "
+                        "samples, sines and noise together; the noise itself is not carried")
+RESIDUAL_NOT_CARRIED = ("the residual noise ({bands} bands, {low:g}–{high:.0f} Hz, {share:.0f} % "
+                        "of the pattern's power) is not carried: the file holds the sines only "
+                        "(the WAV and C-header exports carry the whole pattern)")
+
+
+def residual_limits(pattern: TactilePattern, template: str) -> tuple[str, ...]:
+    """The limit a format states about the pattern's residual noise (see
+    :mod:`realpen.tactile.residual`): ``template`` (:data:`RESIDUAL_IN_ENVELOPE` or
+    :data:`RESIDUAL_NOT_CARRIED`) filled in, or nothing when the pattern has no residual.
+    Formats built from the samples (WAV, C header) carry it and say nothing."""
+    residual = pattern.residual
+    if residual is None:
+        return ()
+    noise = float(residual.powers.sum())
+    sines = sum(c.amplitude ** 2 / 2 for c in pattern.components)
+    share = 100 * noise / (noise + sines) if noise + sines > 0 else 0.0
+    return (template.format(bands=residual.bands, low=residual.band_edges_hz[0],
+                            high=residual.band_edges_hz[-1], share=share),)
 
 
 def title(name: str, tool: str = "") -> str:

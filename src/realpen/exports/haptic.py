@@ -24,7 +24,7 @@ import json
 
 from realpen import __version__
 from realpen.exports import envelope as env
-from realpen.exports.base import Export, check_pattern, check_span
+from realpen.exports.base import RESIDUAL_IN_ENVELOPE, Export, check_pattern, check_span, residual_limits
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["SUFFIX", "LIMITS", "build", "export"]
@@ -79,4 +79,5 @@ def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "p
     points = document["signals"]["continuous"]["envelopes"]["amplitude"]
     return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
                   f"{len(points)} amplitude and frequency breakpoints over "
-                  f"{points[-1]['time'] * 1000:g} ms", limits=LIMITS)
+                  f"{points[-1]['time'] * 1000:g} ms",
+                  limits=LIMITS + residual_limits(pattern, RESIDUAL_IN_ENVELOPE))

@@ -38,7 +38,8 @@ An effect is taken to sound from its position through its last keyframe; pieces 
 component (below) and effects of consecutive hard-bounded sub-patterns therefore end one tick
 before the next begins.
 
-What it cannot carry: frequencies finer than 1 Hz (``frequency_modulation`` is an integer;
+What it cannot carry: the residual noise of a ``sines+residual`` pattern (the file holds its
+sines; the export says so in its limits); frequencies finer than 1 Hz (``frequency_modulation`` is an integer;
 each effect's phase is set so the rounding error is zero at its middle, and a component is
 split into pieces where needed to keep the error under 0.05 rad at their ends: the sum comes
 back within about 3 % RMS); a loop flag — the file holds ``repeats`` periods, and the first
@@ -54,7 +55,14 @@ import numpy as np
 
 from realpen import __version__
 from realpen.errors import fail
-from realpen.exports.base import Export, check_pattern, check_span, title
+from realpen.exports.base import (
+    RESIDUAL_NOT_CARRIED,
+    Export,
+    check_pattern,
+    check_span,
+    residual_limits,
+    title,
+)
 from realpen.tactile.pattern import Component, TactilePattern
 from realpen.tactile.synthesis import fade_samples, subpattern_samples
 
@@ -210,4 +218,4 @@ def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "p
     return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
                   f"{len(band['effects'])} sine effects, {band['lower_frequency_limit']}–"
                   f"{band['upper_frequency_limit']} Hz, timescale {document['timescale']}/s",
-                  limits=LIMITS)
+                  limits=LIMITS + residual_limits(pattern, RESIDUAL_NOT_CARRIED))

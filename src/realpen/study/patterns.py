@@ -48,7 +48,8 @@ def source_recording(profile: PenProfile):
 
 
 def condition_pattern(profile: PenProfile, tactile: dict) -> TactilePattern:
-    """The profile's tactile pattern rebuilt from its source with a condition's counts.
+    """The profile's tactile pattern rebuilt from its source with a condition's counts, as the
+    method builds it (sines only, even for a profile built with the residual).
 
     Args:
         profile: the pen (its source, actuator and tactile parameters are used).
@@ -64,8 +65,9 @@ def condition_pattern(profile: PenProfile, tactile: dict) -> TactilePattern:
     # not when the server starts
     from realpen.tactile.build import build_pattern
 
+    # The conditions are the method's stimuli: sines only, whatever model the profile uses.
     base = {name: value for name, value in profile.meta.provenance.tactile_parameters.items()
-            if name not in COUNT_FIELDS}
+            if name not in (*COUNT_FIELDS, "model")}
     return build_pattern(source_recording(profile), profile.actuator, None, None,
                          **{**base, **tactile})
 

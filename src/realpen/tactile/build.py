@@ -10,14 +10,28 @@
 4. Link components across sub-patterns into tracks with continuous phase (crossfade) or draw
    independent phases (hard), seeded.
 5. Amplitude ∝ √(power share) (or the share) × the actuator weighting 1/|H(f)| (capped).
-6. Synthesise (:mod:`realpen.tactile.synthesis`) and normalise the peak to ``headroom_db``
-   below full scale.
+6. With ``model="sines+residual"``: each sub-pattern's residual — the power spectral density of
+   the same samples its peaks came from, the peaks' main lobes taken out, in bands
+   (:mod:`realpen.tactile.residual`) — on the sines' scale, weighted like them.
+7. Synthesise (:mod:`realpen.tactile.synthesis`; the residual's noise added) and normalise the
+   peak to ``headroom_db`` below full scale.
 
 Per sub-pattern one sinusoid is superposed per principal frequency, with a seeded random phase,
 which keeps the crest factor low. A frequency that persists into the next sub-pattern keeps its
 phase there (see :mod:`realpen.dsp.tracks`), so crossfades never make it dip. The power ratio is
 the component's share of its own sub-pattern's total, so every sub-pattern carries the same
 total level and the fluctuation lies in its frequency content.
+
+The residual's scale. With amplitudes ∝ √(power share) the sines are the recording's
+sinusoids times one factor per sub-pattern, ``c = 1 / √(2 Σp)`` (a peak of power p has
+amplitude √(2p); its component gets √(p / Σp)). The residual takes the same factor: its output
+power spectral density is ``c² · R(f) · w(f)²`` (R the residual's density in the recording, w
+the capped weighting at the band's centre), so sines and noise keep the recording's balance
+before the actuator equalisation. With amplitudes ∝ the power share the sines are no longer a
+scaled copy of anything; the residual then takes the factor that keeps the recording's ratio of
+residual power to the sines' total power, ``c² = Σ(a²/2) / Σp`` over the unweighted amplitudes
+a — which is the same ``c`` in the √ case, so one rule serves both. Sines and residual are
+normalised together; the stored levels are after that gain.
 """
 
 from __future__ import annotations
@@ -32,6 +46,14 @@ from realpen.io.recording import Recording, as_recording
 from realpen.tactile.actuator import Actuator, as_actuator, weighting
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.pattern import Component, TactilePattern
+from realpen.tactile.residual import (
+    MAX_BANDS,
+    MAX_LEVELS,
+    Residual,
+    render_residual,
+    residual_bands,
+    residual_envelope,
+)
 from realpen.tactile.synthesis import synthesize
 
 __all__ = ["build_pattern", "tactile_pattern", "DEFAULT_ACTUATOR"]
@@ -65,6 +87,43 @@ def _subpattern_peaks(mono: np.ndarray, rate: float, analysis, params: TactilePa
             raise fail(source, f"no spectral peaks in the selected {len(segment) / rate:.2f} s")
         peaks.append((freqs[0][keep], powers[0][keep]))
     return peaks
+
+
+def _subpattern_samples(mono: np.ndarray, rate: float, analysis, params: TactileParams
+                        ) -> list[np.ndarray]:
+    """The samples each sub-pattern's peaks came from: its selected unit, or (D–F) the
+    concatenation of its consecutive selected units."""
+    per = params.units_per_subpattern
+    unit_samples = int(round(params.selection_unit_ms * rate / 1000.0))
+    out = []
+    for index in range(params.subpatterns):
+        units = analysis.selected[index * per:(index + 1) * per]
+        out.append(mono[int(units[0]) * unit_samples:(int(units[-1]) + 1) * unit_samples])
+    return out
+
+
+def _residual(mono: np.ndarray, rate: float, analysis, params: TactileParams, units,
+              actuator: Actuator, band: tuple[float, float]) -> tuple[Residual, int]:
+    """The residual before the normalisation gain (levels in full scale per √Hz on the sines'
+    relative scale; see the module docstring), and how many bands the weighting cap limited."""
+    # Only what the pattern's own rate can hold; the bands fit the levels' limit.
+    top = min(band[1], params.rate / 2)
+    if top <= (band[0] if band[0] > 0 else 1000.0 / params.unit_ms):
+        raise ParameterError("fmax_hz", f"leaves no band for the residual above "
+                                        f"{band[0]:g} Hz")
+    edges = residual_bands(band[0], top, 1000.0 / params.unit_ms,
+                           max_bands=min(MAX_BANDS, MAX_LEVELS // params.subpatterns))
+    centres = np.sqrt(np.asarray(edges[:-1]) * np.asarray(edges[1:]))
+    weights = weighting(actuator, centres, band, params.cap_db)
+    levels = []
+    for samples, (freqs, powers) in zip(_subpattern_samples(mono, rate, analysis, params),
+                                        units):
+        density = residual_envelope(samples, rate, freqs, edges)
+        share = powers / powers.sum()
+        base = np.sqrt(share) if params.amplitude == "sqrt" else share
+        scale_sq = float(np.sum(base ** 2) / 2) / float(powers.sum())
+        levels.append(np.sqrt(density * scale_sq) * weights.weights)
+    return Residual(edges, levels, params.seed), int(np.sum(weights.clipped))
 
 
 def build_pattern(recording: Recording, actuator: Actuator | str = DEFAULT_ACTUATOR,
@@ -139,6 +198,11 @@ def build_pattern(recording: Recording, actuator: Actuator | str = DEFAULT_ACTUA
                          joins_next[index]))
     raw = synthesize([(f, a, p, jp, jn) for f, _, _, a, p, _, jp, jn in relative], params.rate,
                      params.unit_ms, params.boundary, params.crossfade_ms)
+    residual, residual_clipped = None, 0
+    if params.model == "sines+residual":
+        residual, residual_clipped = _residual(prepared.mono, prepared.rate, analysis, params,
+                                               units, actuator, band)
+        raw = raw + render_residual(residual, params.rate, params.unit_ms, params.crossfade_ms)
     peak = float(np.max(np.abs(raw)))
     if not np.isfinite(peak) or peak <= 0:
         raise RealPenError(f"{recording.source}: the pattern came out silent or not finite; "
@@ -158,8 +222,19 @@ def build_pattern(recording: Recording, actuator: Actuator | str = DEFAULT_ACTUA
     clipped = sum(bool(c) for sub in relative for c in sub[5])
     notes = ((f"{clipped} component(s) limited by the {params.cap_db:g} dB weighting cap",)
              if clipped else ())
+    if residual is not None:
+        residual = residual.scaled(gain)
+        sines = sum(c.amplitude ** 2 / 2 for sub in subpatterns for c in sub)
+        noise = float(np.sum(residual.powers))
+        notes += (f"residual: {residual.bands} bands, {residual.band_edges_hz[0]:g}–"
+                  f"{residual.band_edges_hz[-1]:.0f} Hz, {100 * noise / (noise + sines):.0f} % "
+                  f"of the pattern's power",)
+        if residual_clipped:
+            notes += (f"{residual_clipped} residual band(s) limited by the {params.cap_db:g} dB "
+                      f"weighting cap",)
     pattern = TactilePattern(subpatterns, params.rate, params.unit_ms, params.boundary,
-                             params.crossfade_ms, actuator, params, analysis, provenance, notes)
+                             params.crossfade_ms, actuator, params, analysis, provenance, notes,
+                             residual=residual)
     return pattern.with_samples(raw * gain)
 
 

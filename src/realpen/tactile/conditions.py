@@ -23,7 +23,8 @@ from realpen.errors import ParameterError, require_choice, require_number
 from realpen.io.limits import MAX_RATE_HZ, MIN_RATE_HZ
 from realpen.tactile.synthesis import BOUNDARIES, check_frames, check_rate, subpattern_samples
 
-__all__ = ["CONDITIONS", "SELECTION_UNIT_MS", "AMPLITUDE_MODES", "SELECTIONS", "TactileParams"]
+__all__ = ["CONDITIONS", "SELECTION_UNIT_MS", "AMPLITUDE_MODES", "SELECTIONS", "MODELS", "RECOMMENDED_MODEL",
+           "TactileParams"]
 
 # Study 1 conditions: (principal frequencies, sub-patterns, sub-pattern length in ms).
 CONDITIONS: dict[str, tuple[int, int, float]] = {
@@ -33,6 +34,12 @@ CONDITIONS: dict[str, tuple[int, int, float]] = {
 SELECTION_UNIT_MS = 100.0  # the unit sequence every condition's stretch is chosen in
 AMPLITUDE_MODES = ("sqrt", "power")
 SELECTIONS = ("stationary", "middle")
+MODELS = ("sines", "sines+residual")  # the method's sinusoids; plus the stochastic residual
+RECOMMENDED_MODEL = "sines+residual"
+"""The model the command line builds with unless told otherwise: on held-out HaTT paper
+textures it comes 2.6× closer to the real vibration than the method's sines
+(``benchmarks/bench_fidelity.py``). :class:`TactileParams` itself defaults to ``"sines"``, the
+method, and the study's conditions A–F always use it."""
 _COUNTS = ("top", "subpatterns", "unit_ms")
 _MAXIMA = {"top": MAX_TOP, "subpatterns": MAX_SUBPATTERNS, "unit_ms": MAX_UNIT_MS}
 
@@ -61,6 +68,9 @@ class TactileParams:
         selection_unit_ms: length in ms of the units the stretch is selected in; ``unit_ms``
             must be a whole multiple of it, and each sub-pattern analyses that many
             consecutive selected units as one (None: ``unit_ms``; D–F: 100 ms).
+        model: ``"sines"`` (the method: principal frequencies only) or ``"sines+residual"``
+            (plus the stochastic residual, :mod:`realpen.tactile.residual`). The study
+            conditions A–F are the method's and use ``"sines"``.
 
     Example:
         >>> TactileParams(condition="D").top, TactileParams(condition="D").unit_ms
@@ -95,6 +105,7 @@ class TactileParams:
     analysis_rate: float | None = None
     condition: str | None = None
     selection_unit_ms: float | None = None
+    model: str = "sines"
 
     def __post_init__(self) -> None:
         condition = self.condition
@@ -151,6 +162,7 @@ class TactileParams:
         require_choice("boundary", self.boundary, BOUNDARIES)
         require_choice("amplitude", self.amplitude, AMPLITUDE_MODES)
         require_choice("selection", self.selection, SELECTIONS)
+        require_choice("model", self.model, MODELS)
         require_number("crossfade_ms", self.crossfade_ms, minimum=0.0)
         if self.crossfade_ms > self.unit_ms:
             raise ParameterError("crossfade_ms", f"{self.crossfade_ms:g} ms is longer than the "
@@ -195,8 +207,15 @@ class TactileParams:
         return self.subpatterns * self.unit_ms
 
     def to_json(self) -> dict:
-        """Every field, JSON-ready (recorded in a profile's provenance)."""
-        return asdict(self)
+        """Every field, JSON-ready (recorded in a profile's provenance).
+
+        ``model`` is left out when it is ``"sines"`` (the default): the provenance of every
+        profile built before the residual existed, and so the bundled pens' versions, stay as
+        they were; reading such a provenance back gives ``"sines"``."""
+        data = asdict(self)
+        if data["model"] == "sines":
+            del data["model"]
+        return data
 
     def updated(self, **options) -> TactileParams:
         """A copy with ``options`` changed, keeping the counts consistent.

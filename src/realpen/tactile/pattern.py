@@ -7,10 +7,15 @@ boundary — *is* the pattern: :meth:`TactilePattern.render` synthesises it at a
 :attr:`TactilePattern.samples` is the rendering at its own rate, ``profile.json`` stores exactly
 these fields (:meth:`TactilePattern.to_json`), and every export reads them.
 
+A pattern may also carry a stochastic :class:`~realpen.tactile.residual.Residual` (model
+``"sines+residual"``): band levels per sub-pattern of a noise added to the sinusoids. It is part
+of the pattern (JSON, equality, version); a pattern without one writes no ``residual`` key, so
+every pattern made before it existed keeps its JSON and version byte for byte.
+
 A pattern built from a recording (:func:`realpen.tactile.build.build_pattern`) also carries
 where it came from: the actuator it is equalised for, the parameters, the analysis and the
 source's provenance. Those are not part of its identity (equality and :attr:`version` look at
-the components and lengths only).
+the components, the residual and the lengths only).
 
 Versions are SHA-256 hashes of a canonical JSON form (:func:`canonical_json`: floats rounded to
 9 significant digits, keys sorted, compact), so the same pattern has the same version on every
@@ -35,6 +40,7 @@ from realpen.errors import ParameterError, require_choice, require_number
 from realpen.io.limits import MAX_RATE_HZ
 from realpen.tactile.actuator import Actuator
 from realpen.tactile.conditions import TactileParams
+from realpen.tactile.residual import Residual, render_residual
 from realpen.tactile.synthesis import (
     BOUNDARIES,
     MAX_RATE,
@@ -201,9 +207,13 @@ class TactilePattern:
             ``frames``, ``history``), the normalisation ``gain`` and ``stretch_s`` (start and
             end in s of the analysed stretch), when built from a recording.
         notes: things the user should know (e.g. components limited by the weighting cap).
+        residual: the stochastic residual added to the sinusoids
+            (:class:`~realpen.tactile.residual.Residual`, one row of band levels per
+            sub-pattern; a JSON dict is accepted), or None (the method's sines only).
 
-    Only the first five fields are the pattern (``profile.json`` stores them; equality and
-    :attr:`version` use them); the others say where it came from.
+    The first five fields and ``residual`` are the pattern (``profile.json`` stores them;
+    equality and :attr:`version` use them); the others say where it came from. ``residual``
+    comes last so that positional calls written before it existed keep their meaning.
 
     Limits (a :class:`~realpen.errors.ParameterError` otherwise, before anything is
     synthesised): at most :data:`~realpen.dsp.limits.MAX_SUBPATTERNS` sub-patterns of at most
@@ -229,6 +239,7 @@ class TactilePattern:
     analysis: Analysis | None = field(default=None, compare=False, metadata=NOT_JSON)
     provenance: dict = field(default_factory=dict, compare=False, metadata=NOT_JSON)
     notes: tuple[str, ...] = field(default=(), compare=False, metadata=NOT_JSON)
+    residual: Residual | None = None
     _samples: np.ndarray | None = field(default=None, init=False, compare=False,
                                         metadata=NOT_JSON)
 
@@ -266,6 +277,12 @@ class TactilePattern:
         if self.actuator is not None and not isinstance(self.actuator, Actuator):
             raise ParameterError("actuator", f"must be an Actuator, got "
                                              f"{type(self.actuator).__name__}")
+        if self.residual is not None:
+            set_(self, "residual", Residual.from_json(self.residual))
+            if len(self.residual.levels) != len(self.subpatterns):
+                raise ParameterError("residual", f"has the levels of "
+                                                 f"{len(self.residual.levels)} sub-pattern(s); "
+                                                 f"the pattern has {len(self.subpatterns)}")
         set_(self, "provenance", dict(self.provenance or {}))
         set_(self, "notes", tuple(self.notes))
 
@@ -326,6 +343,8 @@ class TactilePattern:
         each = (f"{counts[0]} component{'s' if counts[0] != 1 else ''} each" if len(counts) == 1
                 else f"{counts[0]}–{counts[-1]} components")
         extra = "" if self.boundary == "crossfade" else ", hard boundaries"
+        if self.residual is not None:
+            extra += f", residual in {self.residual.bands} bands"
         if self.actuator is not None:
             spec = self.actuator.spec if self.actuator.kind != "measured" else \
                 "measured " + Path(self.actuator.spec).name
@@ -341,6 +360,9 @@ class TactilePattern:
 
         Sub-patterns are ``round(subpattern_ms × rate / 1000)`` samples long at any rate, so a
         rate that makes the sub-pattern a whole number of samples keeps the lengths exact.
+        The residual, if any, is added (:func:`~realpen.tactile.residual.render_residual`): the
+        same noise at the same rate every time, another realisation of the same spectrum at
+        another rate, without its bands above ``rate / 2``.
 
         Returns:
             float64 array, shape (:meth:`frames_at` ``(rate)``,), full scale ±1.
@@ -355,8 +377,12 @@ class TactilePattern:
             raise ParameterError("rate", f"{rate:g} Hz is too low for components up to "
                                          f"{self.max_frequency_hz:.0f} Hz (needs more than "
                                          f"{2 * self.max_frequency_hz:.0f} Hz)")
-        return synthesize(self.subpatterns, rate, self.subpattern_ms, self.boundary,
-                          self.crossfade_ms)
+        out = synthesize(self.subpatterns, rate, self.subpattern_ms, self.boundary,
+                         self.crossfade_ms)
+        if self.residual is not None:
+            out += render_residual(self.residual, rate, self.subpattern_ms, self.crossfade_ms,
+                                   len(self.subpatterns))
+        return out
 
     @property
     def samples(self) -> np.ndarray:
@@ -389,19 +415,23 @@ class TactilePattern:
 
     def to_json(self) -> dict:
         """The pattern's own fields, JSON-ready: ``rate``, ``subpattern_ms``, ``boundary``,
-        ``crossfade_ms`` and ``subpatterns`` (lists of :meth:`Component.to_json`). This is
-        ``profile.json``'s ``tactile`` section; :meth:`from_json` reads it back."""
+        ``crossfade_ms``, ``subpatterns`` (lists of :meth:`Component.to_json`) and, only when
+        there is one, ``residual`` (:meth:`Residual.to_json`). This is ``profile.json``'s
+        ``tactile`` section; :meth:`from_json` reads it back."""
         data = {}
         for item in json_fields(type(self)):
-            if item.name != "subpatterns":
+            if item.name not in ("subpatterns", "residual"):
                 data[item.name] = getattr(self, item.name)
         data["subpatterns"] = [[c.to_json() for c in sub] for sub in self.subpatterns]
+        if self.residual is not None:  # absent, not null: older patterns keep their JSON
+            data["residual"] = self.residual.to_json()
         return data
 
     @classmethod
     def from_json(cls, data: dict, **origin) -> TactilePattern:
         """A pattern from :meth:`to_json`'s form; ``origin`` sets the non-JSON fields
-        (``actuator``, ``params``, ``analysis``, ``provenance``, ``notes``).
+        (``actuator``, ``params``, ``analysis``, ``provenance``, ``notes``). A missing
+        ``residual`` is None.
 
         Raises:
             ParameterError: unknown fields or bad values.
@@ -450,5 +480,6 @@ class TactilePattern:
             "weighting": {"cap_db": cap_db, "clipped_components": self.clipped_count},
             "analysis": analysis,
             "subpatterns": [[c.to_json() for c in sub] for sub in self.subpatterns],
+            **({} if self.residual is None else {"residual": self.residual.to_json()}),
             "notes": list(self.notes),
         }
