@@ -46,7 +46,8 @@ def test_version_prints_the_package_version():
     assert re.fullmatch(r"realpen \d+\.\d+\.\d+\S*", result.stdout.strip())
 
 
-@pytest.mark.parametrize("path", ["", "analyze", "tactile", "sound", "sound loop", "sound render",
+@pytest.mark.parametrize("path", ["", "analyze", "tactile", "tactile build", "tactile render",
+                                  "sound", "sound loop", "sound render",
                                   "sound fit", "profile", "profile build", "export", "serve",
                                   "strokes export", "hatt", "hatt list", "hatt synth"])
 def test_dash_h_is_help_everywhere(path):
@@ -65,7 +66,7 @@ def test_defaults_written_out_for_fast_help_agree_with_the_library():
     from realpen.cli import export_cmds, sound_cmds, tactile_cmds
     from realpen.exports import FORMATS
     from realpen.sound import granular, loop, stroke
-    from realpen.tactile.conditions import CONDITIONS
+    from realpen.tactile.conditions import CONDITIONS, MODELS, RECOMMENDED_MODEL
 
     for module, names in ((loop, ("UNIT_MS", "CROSSFADE_MS", "DEFAULT_RATE", "MIN_RATE",
                                   "MAX_RATE", "REFERENCE_DBFS")),
@@ -76,16 +77,19 @@ def test_defaults_written_out_for_fast_help_agree_with_the_library():
     assert export_cmds.FORMAT_NAMES == tuple(FORMATS)
     for key, (top, subpatterns, unit_ms) in CONDITIONS.items():
         assert f"{key}={top}×{subpatterns}×{unit_ms:g}ms" in tactile_cmds.CONDITION_HELP
+    assert tactile_cmds.MODELS == MODELS
+    assert tactile_cmds.RECOMMENDED_MODEL == RECOMMENDED_MODEL
 
 
 def test_tactile_option_defaults_agree_with_the_library():
-    """analyze, tactile and profile build write TactileParams' defaults (condition B) out."""
+    """analyze, tactile and profile build write TactileParams' defaults (condition B) out,
+    except the model: the command line builds with the recommended one."""
     from realpen.tactile.build import DEFAULT_ACTUATOR
-    from realpen.tactile.conditions import TactileParams
+    from realpen.tactile.conditions import RECOMMENDED_MODEL, TactileParams
 
-    library = TactileParams()
+    library = TactileParams(model=RECOMMENDED_MODEL)
     commands = leaf_commands()
-    for path in ("analyze", "tactile", "profile build"):
+    for path in ("analyze", "tactile build", "profile build"):
         for param in commands[path].params:
             name = "selection" if param.name == "select" else param.name
             if param.default is not None and hasattr(library, name):
@@ -118,8 +122,9 @@ def test_an_option_named_like_a_library_parameter_maps_to_its_own_flag():
 
 
 def test_qualified_keys_tell_apart_two_parameters_of_one_name():
-    assert flag_for("tactile", "rate", ["_load_csv", "load_recording", "tactile"]) == "--input-rate"
-    assert flag_for("tactile", "rate", ["build_pattern", "tactile"]) == "--rate"
+    assert flag_for("tactile build", "rate", ["_load_csv", "load_recording", "tactile"]) \
+        == "--input-rate"
+    assert flag_for("tactile build", "rate", ["build_pattern", "tactile"]) == "--rate"
     assert flag_for("profile build", "unit_ms", ["find_loop_unit", "build_profile"]) \
         == "--sound-unit-ms"
     assert flag_for("profile build", "unit_ms", ["analyze", "build_pattern", "build_profile"]) \

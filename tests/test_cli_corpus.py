@@ -211,6 +211,15 @@ LOOP = "sound loop rec.wav -o out.wav"
 RENDER = "sound render --sound rec.wav --trajectory t.csv -o out.wav"
 FIT = "sound fit m.csv -o out.json"
 BUILD = "profile build --name mine --vibration rec.npz --sound rec.wav"
+FEEL = "tactile render pencil --trajectory t.csv -o out.wav"
+GRID_BUILD = "profile build --name mine --sound rec.wav -o out.zip --vibration-grid grid.csv"
+
+
+def grid_csv(text: str) -> Callable[[Path], None]:
+    """A grid CSV ``grid.csv`` holding ``text``."""
+    def setup(root: Path) -> None:
+        (root / "grid.csv").write_text(text)
+    return setup
 
 CORPUS = [
     # -- an output that is an input, another output, or a side file --------------------------
@@ -225,6 +234,18 @@ CORPUS = [
     bad("tactile-output-is-actuator-csv", "tactile rec.npz -o resp.csv --actuator resp.csv "
         "--force", "resp.csv"),
     bad("tactile-output-exists", TACTILE, "out.wav", existing("out.wav")),
+    bad("tactile-build-output-is-recording", "tactile build rec.npz -o rec.npz --force",
+        "rec.npz"),
+    bad("tactile-render-output-is-trajectory", "tactile render pencil --trajectory t.csv "
+        "-o t.csv --force", "t.csv"),
+    bad("tactile-render-output-inside-bundle", "tactile render bundle --trajectory t.csv "
+        "-o bundle/feel.wav --force", "feel.wav"),
+    bad("tactile-render-output-exists", FEEL, "out.wav", existing("out.wav")),
+    bad("profile-build-grid-output-is-grid-recording", "profile build --name mine --sound "
+        "rec.wav --vibration-grid grid.csv -o rec.npz --force", "rec.npz",
+        grid_csv("speed_mm_s,force_n,path\n50,1,rec.npz\n")),
+    bad("profile-build-output-is-hatt-model", "profile build --name mine --sound rec.wav "
+        "--hatt Models_S.xml -o Models_S.xml --force", "Models_S.xml"),
     bad("sound-loop-output-is-recording", "sound loop rec.wav -o rec.wav --force", "rec.wav"),
     bad("sound-loop-json-is-output", f"{LOOP} --json out.wav", "out.wav"),
     bad("sound-render-output-is-trajectory", "sound render --sound rec.wav --trajectory t.csv "
@@ -303,6 +324,12 @@ CORPUS = [
     bad("profile-build-top-1e9", f"{BUILD} -o out.zip --top 1000000000", "--top"),
     bad("profile-build-sound-unit-1e12", f"{BUILD} -o out.zip --sound-unit-ms 1e12",
         "--sound-unit-ms"),
+    bad("tactile-render-rate-1e9", f"{FEEL} --rate 1000000000", "--rate"),
+    bad("tactile-render-rate-huge", f"{FEEL} --rate {HUGE}", "--rate"),
+    bad("tactile-render-long-stroke-at-384-khz", "tactile render pencil --trajectory long.csv "
+        "-o out.wav --rate 384000", "--rate", long_trajectory),
+    bad("profile-build-grid-too-many-rows", GRID_BUILD, "grid.csv", grid_csv(
+        "speed_mm_s,force_n,path\n" + "".join(f"{k},1,rec.npz\n" for k in range(65)))),
     # -- numbers that are no numbers, and misleading messages ---------------------------------
     bad("analyze-unit-ms-tiny", "analyze rec.npz --unit-ms 0.000001", "--unit-ms"),
     bad("analyze-unit-ms-nan", "analyze rec.npz --unit-ms nan", "--unit-ms"),
@@ -325,6 +352,17 @@ CORPUS = [
     bad("hatt-synth-speed-nan", f"{SYNTH} -o s.wav".replace("--speed 100", "--speed nan"),
         "--speed"),
     bad("profile-build-unit-ms-tiny", f"{BUILD} -o out.zip --unit-ms 0.000001", "--unit-ms"),
+    bad("tactile-render-rate-too-low", f"{FEEL} --rate 400", "--rate"),
+    bad("profile-build-grid-speed-nan", GRID_BUILD, "grid.csv",
+        grid_csv("speed_mm_s,force_n,path\nnan,1,rec.npz\n")),
+    bad("profile-build-grid-force-negative", GRID_BUILD, "line 3",
+        grid_csv("speed_mm_s,force_n,path\n50,1,rec.npz\n80,-1,rec.wav\n")),
+    bad("profile-build-grid-point-twice", GRID_BUILD, "line 3",
+        grid_csv("speed_mm_s,force_n,path\n50,1,rec.npz\n50,1,rec.wav\n")),
+    bad("profile-build-two-vibrations", f"{BUILD} -o out.zip --hatt Models_S.xml",
+        "exactly one of --vibration"),
+    bad("profile-build-no-vibration", "profile build --name mine --sound rec.wav -o out.zip",
+        "exactly one of --vibration"),
     bad("strokes-export-stroke-huge", f"strokes export --store store.sqlite --stroke {HUGE} "
         f"-o out.csv", ("--stroke", "store.sqlite")),
     bad("strokes-export-stroke-400-digits", f"strokes export --store store.sqlite --stroke "
@@ -359,6 +397,28 @@ CORPUS = [
     bad("profile-show-seam-not-a-number", "profile show badseam", "badseam",
         bundle_with_seam("loud")),
     bad("profile-build-deep-coupling", f"{BUILD} -o out.zip --coupling deep.json", "deep.json"),
+    bad("profile-build-garbage-grid-csv", GRID_BUILD.replace("grid.csv", "garbage.csv"),
+        "garbage.csv"),
+    bad("profile-build-empty-grid-csv", GRID_BUILD.replace("grid.csv", "empty.csv"),
+        "empty.csv"),
+    bad("profile-build-grid-csv-without-header", GRID_BUILD, "grid.csv",
+        grid_csv("50,1,rec.npz\n")),
+    bad("profile-build-grid-csv-header-only", GRID_BUILD, "grid.csv",
+        grid_csv("speed_mm_s,force_n,path\n")),
+    bad("profile-build-grid-missing-recording", GRID_BUILD, "line 2",
+        grid_csv("speed_mm_s,force_n,path\n50,1,none.wav\n")),
+    bad("profile-build-grid-garbage-recording", GRID_BUILD, "garbage.npz",
+        grid_csv("speed_mm_s,force_n,path\n50,1,garbage.npz\n80,1,rec.npz\n")),
+    bad("profile-build-garbage-hatt", "profile build --name mine --sound rec.wav -o out.zip "
+        "--hatt garbage.xml", "garbage.xml"),
+    bad("tactile-render-garbage-profile", "tactile render garbage.zip --trajectory t.csv "
+        "-o out.wav", "garbage.zip"),
+    bad("tactile-render-unknown-profile", "tactile render quill --trajectory t.csv -o out.wav",
+        "quill"),
+    bad("tactile-render-garbage-trajectory", "tactile render pencil --trajectory garbage.csv "
+        "-o out.wav", "garbage.csv"),
+    bad("tactile-render-empty-profile-name", ["tactile", "render", "", "--trajectory", "t.csv",
+                                              "-o", "out.wav"], "empty"),
     bad("hatt-list-garbage-xml", "hatt list garbage.xml", "garbage.xml"),
     bad("strokes-export-garbage-store", "strokes export --store garbage.sqlite -o out.csv",
         "garbage.sqlite"),
@@ -375,6 +435,11 @@ CORPUS = [
     bad("analyze-folder", "analyze folder", "folder"),
     bad("analyze-json-folder", "analyze rec.npz --json folder --force", "folder"),
     bad("tactile-output-folder", "tactile rec.npz -o folder --force", "folder"),
+    bad("tactile-render-output-folder", f"{FEEL} --force".replace("out.wav", "folder"),
+        "folder"),
+    bad("tactile-render-trajectory-folder", "tactile render pencil --trajectory folder "
+        "-o out.wav", "folder"),
+    bad("profile-build-grid-csv-folder", GRID_BUILD.replace("grid.csv", "folder"), "folder"),
     bad("sound-render-trajectory-folder", "sound render --sound rec.wav --trajectory folder "
         "-o out.wav", "folder"),
     bad("export-output-folder", "export pencil -f hjif -o folder --force", "folder"),

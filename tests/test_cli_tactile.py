@@ -32,7 +32,7 @@ def test_analyze_prints_summary_and_writes_json(tmp_path):
 def test_tactile_writes_pattern_and_json(tmp_path):
     wav, js = tmp_path / "pattern.wav", tmp_path / "pattern.json"
     result = run_cli("tactile", EXAMPLE, "--actuator", "lra:f0=175,q=8", "--condition", "B",
-                     "-o", wav, "--json", js, "--seed", "3")
+                     "--model", "sines", "-o", wav, "--json", js, "--seed", "3")
     assert result.returncode == 0, result.stderr
     samples, rate = sf.read(wav)
     assert rate == 8000 and len(samples) == 12000
@@ -49,6 +49,22 @@ def test_tactile_writes_pattern_and_json(tmp_path):
     sub = doc["subpatterns"][2]
     rebuilt = sum(c["amplitude"] * np.sin(2 * np.pi * c["frequency_hz"] * t + c["phase"]) for c in sub)
     assert np.allclose(samples[1600:2400][middle], rebuilt[middle], atol=1e-6)
+
+
+def test_tactile_builds_the_residual_by_default_and_the_method_with_model_sines(tmp_path):
+    reports = {}
+    for model in (None, "sines"):
+        js = tmp_path / f"{model}.json"
+        extra = () if model is None else ("--model", model)
+        result = run_cli("tactile", EXAMPLE, "-o", tmp_path / f"{model}.wav", "--json", js, *extra)
+        assert result.returncode == 0, result.stderr
+        reports[model] = json.loads(js.read_text())
+    assert reports[None]["parameters"]["model"] == "sines+residual"
+    assert len(reports[None]["residual"]["levels"]) == 15
+    assert "residual" not in reports["sines"] and "model" not in reports["sines"]["parameters"]
+    assert reports[None]["subpatterns"] != reports["sines"]["subpatterns"]  # gains differ
+    assert [[c["frequency_hz"] for c in sub] for sub in reports[None]["subpatterns"]] == \
+        [[c["frequency_hz"] for c in sub] for sub in reports["sines"]["subpatterns"]]
 
 
 def test_tactile_on_wav_and_csv_inputs(tmp_path):

@@ -77,9 +77,9 @@ def break_bundle(folder: Path, case: str) -> str:
         (folder / "sound.wav").unlink()
         return "missing sound.wav"
     if case == "unknown_format":
-        document["format"] = 3
+        document["format"] = 4
         (folder / "profile.json").write_text(json.dumps(document))
-        return "unknown profile format 3"
+        return "unknown profile format 4"
     if case == "schema":
         del document["tactile"]["subpatterns"]
         (folder / "profile.json").write_text(json.dumps(document))
@@ -232,9 +232,11 @@ def test_bundled_pens_regenerate_within_tolerances_and_with_the_same_version(tmp
 
 
 def test_bundled_pens_are_the_current_format():
+    """Format 2: the lowest that holds a pen without residual and grid (format 3 holds those)."""
+    assert schema.FORMAT == 3
     for name in BUNDLED_PENS:
         document = json.loads((bundled_dir() / name / "profile.json").read_text())
-        assert document["format"] == schema.FORMAT == 2
+        assert document["format"] == 2
 
 
 def test_bundled_pens_reproduce_the_methods_observation():
@@ -357,8 +359,10 @@ def test_profile_json_holds_exactly_the_pattern_and_the_actuator(built, tmp_path
     assert list(document) == ["format", "name", "tool", "description", "tactile", "sound",
                               "actuator", "coupling", "files", "provenance"]
     assert document["tactile"] == built.pattern.to_json()
+    # A pattern without a residual writes no "residual" key (tests/test_residual.py).
     assert list(document["tactile"]) == [f.name for f in json_fields(TactilePattern)
-                                         if f.name != "subpatterns"] + ["subpatterns"]
+                                         if f.name not in ("subpatterns", "residual")] \
+        + ["subpatterns"]
     assert document["actuator"] == built.actuator.to_json()
     loaded = load_profile(folder)
     assert isinstance(loaded.meta.tactile, TactilePattern) and isinstance(loaded.actuator, Actuator)

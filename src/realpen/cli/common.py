@@ -13,15 +13,34 @@ from rich.console import Console
 
 from realpen.errors import RealPenError, fail
 
+try:  # recent typer releases carry their own copy of click
+    from typer.core import TyperGroup
+except ImportError:  # pragma: no cover - every supported typer has it
+    from typer.main import TyperGroup
+
 __all__ = ["console", "err_console", "PROGRESS_AFTER_S", "progress_bar", "force_option",
            "check_outputs", "same_file", "whole_number", "design_input", "working",
-           "terminate_as_interrupt"]
+           "terminate_as_interrupt", "DefaultCommandGroup"]
 
 # Markup off: paths, tool names and descriptions are the user's text, not rich markup.
 console = Console(soft_wrap=True, markup=False, highlight=False)
 err_console = Console(stderr=True, markup=False, highlight=False)
 
 PROGRESS_AFTER_S = 5.0  # recordings longer than this get a progress bar
+
+
+class DefaultCommandGroup(TyperGroup):
+    """A group whose first word is a command only when it names one: otherwise the words are
+    :attr:`default_command`'s (``realpen stats DESIGN ...`` runs ``stats report``, ``realpen
+    tactile RECORDING ...`` runs ``tactile build``). Subclasses set ``default_command``;
+    :func:`realpen.cli.command_path` reads it too."""
+
+    default_command: str = ""
+
+    def parse_args(self, ctx, args):
+        if args and args[0] not in self.commands and args[0] not in ("-h", "--help"):
+            args = [self.default_command, *args]
+        return super().parse_args(ctx, args)
 
 
 def force_option(*names: str) -> bool:

@@ -6,12 +6,12 @@ shows it with the flag the user typed (``"--unit-ms: must be > 0, got -1"``). Th
 only place that knows which flag stands for which parameter:
 
 - :data:`DEFAULT_FLAGS`: the flag a parameter has wherever a command takes it;
-- :data:`COMMAND_FLAGS`: per command (``"tactile"``, ``"sound loop"``, ...), the parameters it
-  names differently. A key may be qualified by the library function that owns the parameter,
-  ``"load_recording.rate"``: ``tactile`` reads a recording whose ``rate`` is ``--input-rate``,
-  while its output ``rate`` is ``--rate``. The qualified key matches when that function is on the
-  call stack of the error (innermost first), so the map says *which* ``rate`` without the library
-  knowing anything of flags.
+- :data:`COMMAND_FLAGS`: per command (``"tactile build"``, ``"sound loop"``, ...), the
+  parameters it names differently. A key may be qualified by the library function that owns the
+  parameter, ``"load_recording.rate"``: ``tactile build`` reads a recording whose ``rate`` is
+  ``--input-rate``, while its output ``rate`` is ``--rate``. The qualified key matches when that
+  function is on the call stack of the error (innermost first), so the map says *which*
+  ``rate`` without the library knowing anything of flags.
 
 A parameter in neither map keeps its Python name, which still says what is wrong. Importing this
 module imports nothing heavy (it runs for ``realpen --help``).
@@ -57,6 +57,7 @@ DEFAULT_FLAGS: dict[str, str] = {
     "amplitude": "--amplitude",
     "seed": "--seed",
     "cap_db": "--cap-db",
+    "model": "--model",
     # friction sound and coupling (realpen.sound)
     "mode": "--mode",
     "length_ms": "--length-ms",
@@ -83,7 +84,7 @@ COMMAND_FLAGS: dict[str, dict[str, str]] = {
     # The report's power simulation is --power-sims.
     "stats report": {"sims": "--power-sims"},
     # The recording's rate (a CSV without time) is --input-rate; --rate is the pattern's.
-    "tactile": {"load_recording.rate": "--input-rate"},
+    "tactile build": {"load_recording.rate": "--input-rate"},
     "profile build": {
         "load_recording.rate": "--input-rate",
         # build_profile's own unit_ms and crossfade_ms are the sound loop's; the tactile
@@ -124,9 +125,9 @@ def flag_for(command: str, parameter: str, functions: Sequence[str] = ()) -> str
     Returns:
         The flag (``"--unit-ms"``), or ``parameter`` itself when no map names it.
 
-    >>> flag_for("tactile", "rate", ["_load_csv", "load_recording"])
+    >>> flag_for("tactile build", "rate", ["_load_csv", "load_recording"])
     '--input-rate'
-    >>> flag_for("tactile", "rate", ["resolve"])
+    >>> flag_for("tactile build", "rate", ["resolve"])
     '--rate'
     """
     overrides = COMMAND_FLAGS.get(command, {})

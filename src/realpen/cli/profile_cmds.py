@@ -14,6 +14,7 @@ import typer
 from realpen.cli import sub_app
 from realpen.cli.common import PROGRESS_AFTER_S, check_outputs, console, force_option, progress_bar
 from realpen.cli.sound_cmds import CROSSFADE_MS, UNIT_MS
+from realpen.cli.tactile_cmds import model_option, model_options
 from realpen.errors import RealPenError
 
 profile_app = sub_app("profile", "Pen profiles: build, list and show.")
@@ -22,7 +23,16 @@ profile_app = sub_app("profile", "Pen profiles: build, list and show.")
 @profile_app.command("build")
 def build(
     name: str = typer.Option(..., "--name", help="Profile name (letters, digits, - _ .)."),
-    vibration: Path = typer.Option(..., "--vibration", help="Vibration recording (WAV/CSV/NPZ)."),
+    vibration: Path | None = typer.Option(None, "--vibration",
+                                          help="Vibration recording (WAV/CSV/NPZ)."),
+    vibration_grid: Path | None = typer.Option(
+        None, "--vibration-grid", metavar="GRID.csv",
+        help="Instead of --vibration, for a feel that follows the pen: a CSV with the header "
+             "speed_mm_s,force_n,path and one recording per row (paths relative to the CSV)."),
+    hatt: Path | None = typer.Option(
+        None, "--hatt", metavar="MODEL.xml",
+        help="Instead of --vibration: a HaTT texture model; a pattern at every model vertex "
+             "(those at speed 0 or force 0 are left out)."),
     sound: Path = typer.Option(..., "--sound", help="Friction-sound recording (WAV/FLAC/OGG)."),
     output: Path | None = typer.Option(
         None, "-o", "--output", help="Bundle folder, or a .zip file (or --install)."),
@@ -52,17 +62,20 @@ def build(
                                              help="Crossfade at the sound loop's wrap in ms."),
     coupling: Path | None = typer.Option(None, "--coupling",
                                          help="Coupling JSON (Eq. 1); default constants if absent."),
+    model: str | None = model_option(),
     force: bool = force_option(),
 ) -> None:
     """Run the tactile and auditory pipelines and write a profile bundle atomically.
 
-    Says where the bundle went. With --install it goes into your profiles folder, named after
-    the profile.
+    The vibration is one recording (--vibration), recordings at several (speed, force) points
+    (--vibration-grid) or a HaTT texture model (--hatt). Says where the bundle went. With
+    --install it goes into your profiles folder, named after the profile.
     """
+    from realpen.datasets.hatt import load_hatt
     from realpen.io.paths import user_profiles_dir
     from realpen.io.recording import load_recording
     from realpen.profile import build_profile, save_profile
-    from realpen.profile.build import check_name
+    from realpen.profile.build import check_name, read_grid_csv
     from realpen.sound.coupling import Coupling
     from realpen.sound.loop import load_sound
     from realpen.tactile.actuator import parse_actuator
@@ -70,19 +83,35 @@ def build(
 
     if install == (output is not None):
         raise RealPenError("profile build: give either -o/--output or --install")
+    if sum(given is not None for given in (vibration, vibration_grid, hatt)) != 1:
+        raise RealPenError("profile build: give exactly one of --vibration, --vibration-grid "
+                           "and --hatt")
     if install:
         # The name becomes the folder's name: a valid name holds no path, checked before any work.
         output = user_profiles_dir() / check_name(name)
-    check_outputs(output, force=force, folders=True,
-                  inputs={"vibration recording": vibration, "sound recording": sound})
+    inputs = {"vibration recording": vibration, "vibration grid": vibration_grid,
+              "HaTT model": hatt, "sound recording": sound, "coupling": coupling}
+    check_outputs(output, force=force, folders=True, inputs=inputs)
     params = TactileParams.resolve(condition, top, subpatterns, unit_ms, rate=rate,
                                    boundary=boundary, seed=seed, cap_db=cap_db, axis=axis,
-                                   analysis_rate=analysis_rate)
+                                   analysis_rate=analysis_rate, **model_options(model))
     response = parse_actuator(actuator)
     constants = Coupling.load(coupling) if coupling is not None else Coupling()
-    shake = load_recording(vibration, rate=input_rate)
+    if vibration_grid is not None:
+        rows = read_grid_csv(vibration_grid)
+        check_outputs(output, force=force, folders=True, inputs={
+            **inputs, **{f"grid recording {n + 1}": path for n, (_, _, path) in
+                         enumerate(rows)}})
+        shake = [(speed, force_n, load_recording(path, rate=input_rate))
+                 for speed, force_n, path in rows]
+        long = True
+    elif hatt is not None:
+        shake, long = load_hatt(hatt), True
+    else:
+        shake = load_recording(vibration, rate=input_rate)
+        long = shake.duration > PROGRESS_AFTER_S
     noise = load_sound(sound)
-    with progress_bar("building", shake.duration > PROGRESS_AFTER_S) as progress:
+    with progress_bar("building", long) as progress:
         profile = build_profile(name, tool, shake, noise, response, params, sound_unit_ms,
                                 sound_crossfade_ms, constants, description, progress=progress)
     written = Path(save_profile(profile, output)).resolve()
@@ -141,6 +170,8 @@ def show(
         table.add_row(str(index), "  ".join(f"{comp.frequency_hz:.1f} ({comp.amplitude:.3f})"
                                             for comp in sub))
     console.print(table)
+    for line in profile_lines(profile):
+        console.print(line)
     console.print(f"sound unit: {meta.sound.unit_ms:g} ms from {meta.sound.start_s} s, seam level "
                   f"jump {meta.sound.seam.get('level_jump_db', float('nan')):.2f} dB")
     if plot is not None:
@@ -148,3 +179,28 @@ def show(
 
         save_profile_plot(profile, plot)
         console.print(f"wrote {plot}")
+
+
+def profile_lines(profile) -> list[str]:
+    """What ``profile show`` says of the tactile model (sines, residual) and of the grid."""
+    meta = profile.meta
+    pattern = meta.tactile
+    residual = getattr(pattern, "residual", None)
+    model = meta.provenance.tactile_parameters.get("model")
+    model = model or ("sines+residual" if residual is not None else "sines")
+    lines = [f"tactile model: {model}" + ("" if residual is None else
+                                           f" (residual in {len(residual.band_edges_hz) - 1} "
+                                           f"bands)")]
+    source = meta.provenance.model or {}
+    if meta.grid is None:
+        lines.append("grid: none (one pattern, whatever the speed and force)")
+        return lines
+    grid = meta.grid
+    xy = grid.coordinates
+    made = f", from HaTT '{source['hatt']}'" if "hatt" in source else ""
+    lines.append(f"grid: {len(grid.points)} points{made}, speed {xy[:, 0].min():.4g}–"
+                 f"{xy[:, 0].max():.4g} mm/s, force {xy[:, 1].min():.3g}–{xy[:, 1].max():.3g} N "
+                 f"({grid.full_pressure_force_n:g} N at full pressure), {len(grid.triangles)} "
+                 f"triangles; the table is point {grid.reference} at "
+                 f"{xy[grid.reference, 0]:.4g} mm/s, {xy[grid.reference, 1]:.3g} N")
+    return lines

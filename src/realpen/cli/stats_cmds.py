@@ -15,6 +15,7 @@ import typer
 
 from realpen.cli import CONTEXT_SETTINGS, app
 from realpen.cli.common import (
+    DefaultCommandGroup,
     check_outputs,
     console,
     design_input,
@@ -26,23 +27,15 @@ from realpen.cli.common import (
 )
 from realpen.errors import RealPenError
 
-try:  # recent typer releases carry their own copy of click
-    from typer.core import TyperGroup
-except ImportError:  # pragma: no cover - every supported typer has it
-    from typer.main import TyperGroup
-
 DESIGN_HELP = "A built-in design (study1, study2) or a design file (.yaml, .yml, .json)."
 
 
-class _ReportByDefault(TyperGroup):
-    """``realpen stats DESIGN ...`` runs ``report``: the group's first word is a command only
-    when it names one."""
+class _ReportByDefault(DefaultCommandGroup):
+    """``realpen stats DESIGN ...`` runs ``report``; ``power`` reads its participants spread."""
 
     default_command = "report"
 
     def parse_args(self, ctx, args):
-        if args and args[0] not in self.commands and args[0] not in ("-h", "--help"):
-            args = [self.default_command, *args]
         if args and args[0] == "power":
             args = _spread_participants(args)
         return super().parse_args(ctx, args)

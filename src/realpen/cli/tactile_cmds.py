@@ -1,7 +1,8 @@
-"""``realpen analyze`` and ``realpen tactile``.
+"""``realpen analyze`` and ``realpen tactile [build] | render``.
 
-Only typer and the standard library are imported here; the library (numpy, scipy, soundfile)
-is imported inside the commands, so ``realpen --help`` stays fast.
+``realpen tactile RECORDING ...`` is short for ``realpen tactile build RECORDING ...``. Only
+typer and the standard library are imported here; the library (numpy, scipy, soundfile) is
+imported inside the commands, so ``realpen --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -10,9 +11,10 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import app
+from realpen.cli import CONTEXT_SETTINGS, app
 from realpen.cli.common import (
     PROGRESS_AFTER_S,
+    DefaultCommandGroup,
     check_outputs,
     console,
     force_option,
@@ -26,6 +28,38 @@ AXIS_HELP = "How axes become one: dft321 (default for several axes), magnitude, 
 # checks that the two agree.
 CONDITION_HELP = ("Study-1 preset: A=5×15×100ms, B=10×15×100ms, C=15×15×100ms, D=5×1×1500ms, "
                   "E=10×1×1500ms, F=15×1×1500ms (default B).")
+# realpen.tactile.conditions.MODELS and RECOMMENDED_MODEL, written out for fast help (a test
+# checks they agree).
+MODELS = ("sines", "sines+residual")
+RECOMMENDED_MODEL = "sines+residual"
+MODEL_HELP = ("sines+residual (the default: the method's principal frequencies plus the noise "
+              "floor between them, as shaped noise; closer to the real pen) | sines (the "
+              "method exactly, as in the study's conditions A–F).")
+
+
+def model_option():
+    """The ``--model`` option of the commands that build patterns (default: the recommended
+    model, sines+residual)."""
+    return typer.Option(RECOMMENDED_MODEL, "--model", help=MODEL_HELP)
+
+
+def model_options(model: str | None) -> dict:
+    """``model=`` for :class:`~realpen.tactile.conditions.TactileParams`, when one was given."""
+    return {} if model is None else {"model": model}
+
+
+class _BuildByDefault(DefaultCommandGroup):
+    """``realpen tactile RECORDING ...`` runs ``tactile build``."""
+
+    default_command = "build"
+
+
+tactile_app = typer.Typer(
+    cls=_BuildByDefault, no_args_is_help=True, context_settings=CONTEXT_SETTINGS,
+    help="Tactile patterns: `realpen tactile RECORDING -o pattern.wav` (build, the default) "
+         "makes a recording's looping pattern; `realpen tactile render PROFILE --trajectory "
+         "STROKE.csv -o out.wav` gives the feel along a stroke.")
+app.add_typer(tactile_app, name="tactile")
 
 
 @app.command()
@@ -42,34 +76,51 @@ def analyze(
                                help="Which units: stationary (most stationary run) or middle."),
     rate: float | None = typer.Option(None, "--rate",
                                       help="Sampling rate in Hz of a CSV with no time column."),
-    analysis_rate: float | None = typer.Option(None, "--analysis-rate",
-                                               help="Resample to this rate in Hz first."),
+    analysis_rate: float | None = typer.Option(
+        None, "--analysis-rate", help="Resample to this rate in Hz first (reads the whole "
+                                      "recording into memory, within the in-memory limits)."),
     json_out: Path | None = typer.Option(None, "--json",
                                          help="Write the analysis of every unit as JSON."),
     every_unit: bool = typer.Option(False, "--all", help="Print every unit, not only the "
                                                          "selected ones."),
     force: bool = force_option(),
 ) -> None:
-    """Print the principal frequencies of the selected unit sequences (--all: of every unit)."""
+    """Print the principal frequencies of the selected unit sequences (--all: of every unit).
+
+    The recording is read in blocks: memory does not grow with its length.
+    Each unit's DFT321 power spectrum is the sum of its axes' unit spectra.
+    --analysis-rate resamples the whole recording in memory first.
+    """
     from rich.table import Table
 
-    from realpen.dsp.filters import prepare
-    from realpen.dsp.spectrum import analyze as analyze_signal
-    from realpen.io.files import write_json
+    from realpen.dsp.filters import resample
+    from realpen.dsp.stream import analyze_stream, combined_name
+    from realpen.io.blocks import ArrayStream, open_stream
+    from realpen.io.files import atomic_path
     from realpen.io.recording import load_recording
 
     check_outputs(json_out, force=force, inputs={"recording": recording})
-    loaded = load_recording(recording, rate=rate)
-    prepared = prepare(loaded, axis, analysis_rate, highpass_hz)
-    with progress_bar("analysing", loaded.duration > PROGRESS_AFTER_S) as progress:
-        result = analyze_signal(prepared.mono, prepared.rate, unit_ms, top, subpatterns, select,
-                                fmin=highpass_hz, source=str(recording), progress=progress)
+    stream = open_stream(recording, rate=rate)
+    rate_in, axes_in = stream.rate, stream.axes
+    source = stream
+    if analysis_rate is not None:
+        # Resampling needs the whole signal: the in-memory path, with its limits.
+        loaded = resample(load_recording(recording, rate=rate), analysis_rate,
+                          parameter="analysis_rate")
+        source = ArrayStream(loaded.samples, loaded.rate, loaded.axes, source=str(recording))
+    with progress_bar("analysing", stream.duration_hint > PROGRESS_AFTER_S) as progress:
+        result = analyze_stream(source, unit_ms=unit_ms, top=top, count=subpatterns,
+                                selection=select, fmin=highpass_hz, highpass_hz=highpass_hz,
+                                axis=axis, progress=progress)
+    duration = source.frames / source.rate  # known once the whole recording has been read
     if json_out is not None:
-        write_json(json_out, result.to_json())
+        # A unit at a time: a day's report as one document would take gigabytes.
+        with atomic_path(json_out) as tmp, open(tmp, "w", encoding="utf-8") as handle:
+            handle.writelines(result.json_chunks())
     first, last = int(result.selected[0]), int(result.selected[-1])
-    console.print(f"{recording}: {loaded.duration:.2f} s, {len(loaded.axes)} axis(es) "
-                  f"({', '.join(loaded.axes)}) at {loaded.rate:g} Hz → "
-                  f"{prepared.axes[0]}, high-pass {highpass_hz:g} Hz")
+    console.print(f"{recording}: {duration:.2f} s, {len(axes_in)} axis(es) "
+                  f"({', '.join(axes_in)}) at {rate_in:g} Hz → "
+                  f"{combined_name(axes_in, axis)}, high-pass {highpass_hz:g} Hz")
     console.print(f"{len(result.starts_s)} units of {unit_ms:g} ms; selected units {first}–{last} "
                   f"({result.starts_s[first]:.2f}–{result.starts_s[last] + unit_ms / 1000:.2f} s, "
                   f"{select})")
@@ -86,7 +137,7 @@ def analyze(
         console.print(f"wrote {json_out}")
 
 
-@app.command()
+@tactile_app.command("build")
 def tactile(
     recording: Path = typer.Argument(..., help="Vibration recording: WAV/FLAC, CSV or NPZ."),
     output: Path = typer.Option(..., "-o", "--output", help="Pattern WAV to write."),
@@ -113,10 +164,14 @@ def tactile(
         None, "--input-rate", help="Sampling rate in Hz of a CSV with no time column."),
     analysis_rate: float | None = typer.Option(None, "--analysis-rate",
                                                help="Resample to this rate in Hz first."),
+    model: str | None = model_option(),
     json_out: Path | None = typer.Option(None, "--json", help="Write components and parameters."),
     force: bool = force_option(),
 ) -> None:
-    """Build the looping tactile pattern of a recording, equalised for an actuator."""
+    """Build the looping tactile pattern of a recording, equalised for an actuator.
+
+    The default command: `realpen tactile RECORDING -o pattern.wav` is this one.
+    """
     import numpy as np
 
     from realpen.io.files import json_text, wav_bytes, write_files
@@ -133,7 +188,7 @@ def tactile(
                                    boundary=boundary, crossfade_ms=crossfade_ms,
                                    amplitude=amplitude, seed=seed, cap_db=cap_db,
                                    selection=select, highpass_hz=highpass_hz, axis=axis,
-                                   analysis_rate=analysis_rate)
+                                   analysis_rate=analysis_rate, **model_options(model))
     loaded = load_recording(recording, rate=input_rate)
     with progress_bar("analysing", loaded.duration > PROGRESS_AFTER_S) as progress:
         pattern = build_pattern(loaded, response, params, progress)
@@ -150,3 +205,47 @@ def tactile(
     if json_out is not None:
         console.print(f"wrote {json_out}")
 
+
+@tactile_app.command("render")
+def render(
+    profile_ref: str = typer.Argument(..., metavar="PROFILE",
+                                      help="Profile name, folder or .zip."),
+    trajectory_path: Path = typer.Option(..., "--trajectory",
+                                         help="Stroke CSV: t,x,y,pressure (s, mm, mm, 0–1)."),
+    output: Path = typer.Option(..., "-o", "--output", help="WAV to write (32-bit float)."),
+    rate: int | None = typer.Option(None, "--rate", callback=whole_number,
+                                    help="Output rate in Hz (default: the pattern's own)."),
+    force: bool = force_option(),
+) -> None:
+    """Render what a stroke feels like: the tactile drive along a recorded stroke.
+
+    The loop plays while the pen moves on the surface (the profile's coupling gates it, as
+    the live page does); with a vibration grid the patterns follow the pen's speed and force.
+    """
+    import numpy as np
+
+    from realpen.errors import fail
+    from realpen.io.files import wav_bytes, write_files
+    from realpen.profile import resolve_profile
+    from realpen.sound.stroke import load_trajectory
+    from realpen.tactile.stroke import render_tactile_stroke
+
+    given = Path(profile_ref) if profile_ref.strip() else None  # Path("") is the current folder
+    check_outputs(output, force=force,
+                  inputs={"profile": given if given is not None and given.exists() else None,
+                          "trajectory": trajectory_path})
+    profile = resolve_profile(profile_ref)
+    # A profile found by name lives in a folder too (bundled, or the user's): never write there.
+    check_outputs(output, force=force, inputs={"profile": profile.path})
+    trajectory = load_trajectory(trajectory_path)
+    grid = profile.grid
+    rate = grid.rate if rate is None else rate
+    samples = render_tactile_stroke(grid, trajectory, rate, coupling=profile.coupling)
+    if not np.all(np.isfinite(samples)):
+        raise fail(output, "the rendered drive holds NaN or infinite samples; not written")
+    write_files({output: wav_bytes(samples, rate)})
+    points = len(grid.points)
+    console.print(f"wrote {output}: {len(samples) / rate:.2f} s at {rate} Hz, "
+                  f"{points} pattern{'s' if points != 1 else ''} "
+                  f"({'following speed and force' if points > 1 else 'one loop'}), peak "
+                  f"{float(np.max(np.abs(samples), initial=0.0)):.3f}")

@@ -3,8 +3,9 @@
 A bundle is a folder (or the same files in a ``.zip``) holding
 
 - ``profile.json`` — versioned and validated (:mod:`realpen.profile.schema`): name, tool, the
-  tactile pattern's fields, the sound unit, the actuator, the coupling constants (Eq. 1), the
-  two WAVs' rates, lengths and SHA-256, and provenance;
+  tactile pattern's fields, the vibration grid's points when there are several (format 3: their
+  loops are rendered from this JSON when needed, no more WAVs), the sound unit, the actuator,
+  the coupling constants (Eq. 1), the two WAVs' rates, lengths and SHA-256, and provenance;
 - ``tactile.wav`` — the looping tactile pattern (mono, 32-bit float, ``smpl`` loop chunk);
 - ``sound.wav`` — the looping friction-sound unit (mono, 32-bit float, RMS −20 dBFS, ``smpl``).
 
@@ -60,6 +61,7 @@ from realpen.profile.schema import (
 )
 from realpen.tactile.actuator import Actuator
 from realpen.tactile.conditions import TactileParams
+from realpen.tactile.grid import VibrationGrid
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["PenProfile", "save_profile", "load_profile", "bundle_wavs", "MAX_ZIP_ENTRIES",
@@ -132,6 +134,32 @@ class PenProfile:
         return pattern.with_samples(self.tactile)
 
     @property
+    def grid(self) -> VibrationGrid:
+        """The tactile patterns at (speed, force) points that the feel follows
+        (:class:`~realpen.tactile.grid.VibrationGrid`): the profile's own grid, or a grid of one
+        point, :attr:`pattern`, when it has none (which plays exactly as that one pattern).
+
+        Every point's pattern carries the profile's actuator and parameters; the reference
+        point's is :attr:`pattern` (the samples of ``tactile.wav``), the others are rendered from
+        their JSON when their samples are first asked for. Kept for the ``meta`` it was made from.
+        """
+        cached = self.__dict__.get("_grid")
+        if cached is not None and cached[0] is self.meta and cached[1] is self.tactile:
+            return cached[2]
+        pattern = self.pattern
+        own = self.meta.grid
+        if own is None:
+            grid = VibrationGrid.single(pattern)
+        else:
+            points = tuple(
+                replace(point, pattern=pattern if index == own.reference else
+                        replace(point.pattern, actuator=pattern.actuator, params=pattern.params))
+                for index, point in enumerate(own.points))
+            grid = replace(own, points=points, notes=pattern.notes)
+        self.__dict__["_grid"] = (self.meta, self.tactile, grid)
+        return grid
+
+    @property
     def sound_loop(self):
         """The sound unit as a :class:`realpen.sound.loop.SoundLoop` (the one sound-loop type:
         samples, rate in Hz, how it was cut, its seam), for the exports and the display."""
@@ -163,11 +191,12 @@ class PenProfile:
         return cached[1]
 
     def summary(self) -> str:
-        """One line: name, tool, components, lengths, actuator."""
+        """One line: name, tool, components, lengths, grid points (if any), actuator."""
         t, s = self.meta.tactile, self.meta.sound
         counts = {len(sub) for sub in t.subpatterns}
+        grid = "" if self.meta.grid is None else f" at {len(self.meta.grid.points)} points"
         return (f"{self.name}: {self.meta.tool}; tactile {len(t.subpatterns)}×{t.subpattern_ms:g} ms, "
-                f"{'/'.join(map(str, sorted(counts)))} components, {t.rate} Hz; sound "
+                f"{'/'.join(map(str, sorted(counts)))} components, {t.rate} Hz{grid}; sound "
                 f"{s.unit_ms:g} ms {s.mode} at {s.rate} Hz; actuator {self.meta.actuator.spec}")
 
     def __repr__(self) -> str:
@@ -250,12 +279,17 @@ def save_profile(profile: PenProfile, target: str | os.PathLike) -> Path:
         The bundle's path (a folder's resolved path).
 
     Raises:
-        ParameterError: the samples do not match the pattern or the sound section.
+        ParameterError: the samples do not match the pattern or the sound section, or
+            ``profile.json`` would be larger than a bundle may hold.
         RealPenError: the target cannot be written (naming it).
     """
     target = Path(target)
     wavs = bundle_wavs(profile)
     files = {PROFILE_JSON: _document_bytes(profile._current_meta(wavs)), **wavs}
+    if len(files[PROFILE_JSON]) > MAX_JSON_BYTES:  # loading would refuse it: never written
+        raise ParameterError("profile", f"{PROFILE_JSON} would be {len(files[PROFILE_JSON]):,} "
+                                        f"bytes, over the {MAX_JSON_BYTES:,} a profile may "
+                                        f"hold; use fewer grid points or components")
     if target.suffix.lower() == ".zip":
         with atomic_path(target) as tmp:
             with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
@@ -416,7 +450,7 @@ def _first_error(error: ValidationError) -> str:
 
 
 def load_profile(path: str | os.PathLike) -> PenProfile:
-    """Load and check a bundle (folder or ``.zip``) of format 1 or 2.
+    """Load and check a bundle (folder or ``.zip``) of format 1, 2 or 3.
 
     Args:
         path: the bundle's folder or ``.zip``; a bare name that is no file here (``"pencil"``)

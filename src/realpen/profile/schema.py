@@ -1,10 +1,13 @@
-"""``profile.json``: the versioned, validated description of a pen profile (format 2).
+"""``profile.json``: the versioned, validated description of a pen profile (formats 2 and 3).
 
 ::
 
     {"format": 2, "name": "pencil", "tool": "pencil (4B)", "description": "…",
      "tactile":  TactilePattern.to_json()  (rate, subpattern_ms, boundary, crossfade_ms,
                                             subpatterns: [[component, …], …]),
+     "grid":     VibrationGrid.to_json()   (format 3 only, when the profile has one:
+                                            full_pressure_force_n, reference,
+                                            points: [{speed_mm_s, force_n, tactile}, …]),
      "sound":    {rate, frames, mode, unit_ms, crossfade_ms, start_s, rms_dbfs, seam},
      "actuator": Actuator.to_json()        (spec, kind, params[, table_hz, table_response]),
      "coupling": Coupling (realpen.coupling/1, Eq. 1),
@@ -20,6 +23,14 @@ on loading).
 Format 1 (RealPen ≤ 0.1: WAV rate, frames and SHA-256 inside the ``tactile`` and ``sound``
 sections, the actuator's ``table_*`` always present) is still read: :func:`upgrade` turns it
 into format 2.
+
+Format 3 adds what format 2 cannot hold: a tactile pattern with a residual (its ``tactile``
+section then has a ``residual`` key) and a vibration grid (the ``grid`` section: patterns at
+several (speed, force) points, :class:`realpen.tactile.grid.VibrationGrid`; the reference
+point's pattern is the ``tactile`` section and ``tactile.wav``, the others are rendered from
+their JSON when needed). A profile with neither is written as format 2, byte for byte as
+before, so existing profiles and their versions do not change; :attr:`ProfileMeta.format` is
+always the lowest format that holds the profile.
 
 The profile's *version* (:func:`profile_version`) is the SHA-256 of a canonical form of the
 document without ``files`` (floats rounded to 9 significant digits, keys sorted, compact
@@ -52,23 +63,28 @@ from pydantic import (
     Field,
     PlainSerializer,
     PlainValidator,
+    SerializerFunctionWrapHandler,
     ValidationError,
     WithJsonSchema,
     create_model,
+    model_serializer,
     model_validator,
 )
 
 from realpen.io.limits import MAX_RATE_HZ, MIN_RATE_HZ
 from realpen.tactile.actuator import KINDS, Actuator
+from realpen.tactile.grid import MAX_GRID_POINTS, GridPoint, VibrationGrid
 from realpen.tactile.pattern import Component, TactilePattern, content_version, json_fields
 
 __all__ = ["FORMAT", "READABLE_FORMATS", "NAME_PATTERN", "PROFILE_JSON", "TACTILE_WAV",
            "SOUND_WAV", "BUNDLE_FILES", "ComponentModel", "TactileModel", "SoundSection",
-           "WavFile", "BundleFiles", "SourceFile", "Provenance", "ProfileMeta", "model_of",
-           "upgrade", "profile_version", "MAX_WAV_FRAMES", "MAX_WAV_BYTES", "MAX_SECTION_MS"]
+           "GridPointSection", "GridSection", "needed_format", "WavFile", "BundleFiles",
+           "SourceFile", "Provenance", "ProfileMeta", "model_of", "upgrade", "profile_version",
+           "MAX_WAV_FRAMES", "MAX_WAV_BYTES", "MAX_SECTION_MS"]
 
-FORMAT = 2
-READABLE_FORMATS = (1, 2)
+FORMAT = 3
+"""The newest format written (a profile without residual and grid is still written as 2)."""
+READABLE_FORMATS = (1, 2, 3)
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 PROFILE_JSON, TACTILE_WAV, SOUND_WAV = "profile.json", "tactile.wav", "sound.wav"
 BUNDLE_FILES = (PROFILE_JSON, TACTILE_WAV, SOUND_WAV)
@@ -135,7 +151,10 @@ TactileModel = model_of(TactilePattern, "TactileModel", {
 
 
 def _pattern(model: BaseModel) -> TactilePattern:
-    return TactilePattern.from_json(model.model_dump())
+    data = model.model_dump()
+    if data.get("residual", 0) is None:  # to_json omits it when there is none
+        del data["residual"]
+    return TactilePattern.from_json(data)
 
 
 def _pattern_json(value: Any) -> Any:
@@ -195,6 +214,49 @@ class SoundSection(_Strict):
     seam: dict[str, FiniteNumber]
 
 
+class GridPointSection(_Strict):
+    """One point of the ``grid`` section: speed (mm/s), force (N) and the pattern felt there."""
+
+    speed_mm_s: float = Field(ge=0)
+    force_n: float = Field(ge=0)
+    tactile: TactileField
+
+
+class GridSection(_Strict):
+    """The ``grid`` section (format 3): tactile patterns at (speed, force) points
+    (:class:`realpen.tactile.grid.VibrationGrid`); validating it yields a ``VibrationGrid``."""
+
+    full_pressure_force_n: float = Field(gt=0)
+    reference: int = Field(ge=0)
+    points: list[GridPointSection] = Field(min_length=1, max_length=MAX_GRID_POINTS)
+
+
+def _grid(model: GridSection) -> VibrationGrid:
+    for index, point in enumerate(model.points):
+        pattern = point.tactile
+        if pattern.max_frequency_hz >= pattern.rate / 2:  # it could never be rendered
+            raise ValueError(f"points.{index}: components up to "
+                             f"{pattern.max_frequency_hz:.0f} Hz do not fit a pattern at "
+                             f"{pattern.rate} Hz")
+    points = tuple(GridPoint(p.speed_mm_s, p.force_n, p.tactile) for p in model.points)
+    return VibrationGrid(points, model.full_pressure_force_n, model.reference)
+
+
+def _grid_json(value: Any) -> Any:
+    return value.to_json() if isinstance(value, VibrationGrid) else value
+
+
+GridField = Annotated[GridSection, BeforeValidator(_grid_json), AfterValidator(_grid),
+                      PlainSerializer(VibrationGrid.to_json)]
+
+
+def needed_format(pattern: TactilePattern, grid: VibrationGrid | None) -> int:
+    """The lowest format that holds a profile: 3 with a residual or a grid, else 2."""
+    residual = any(getattr(p, "residual", None) is not None
+                   for p in (pattern, *(grid.patterns if grid is not None else ())))
+    return 3 if residual or grid is not None else 2
+
+
 class WavFile(_Strict):
     """One WAV of the bundle: its name, rate (Hz), length (frames) and SHA-256."""
 
@@ -231,23 +293,47 @@ class Provenance(_Strict):
 
 
 class ProfileMeta(_Strict):
-    """``profile.json``, format 2 (see the module docstring).
+    """``profile.json``, format 2 or 3 (see the module docstring).
 
     ``tactile`` is a :class:`~realpen.tactile.pattern.TactilePattern` (without samples),
-    ``actuator`` an :class:`~realpen.tactile.actuator.Actuator`, ``coupling`` a
-    :class:`~realpen.sound.coupling.Coupling`.
+    ``grid`` a :class:`~realpen.tactile.grid.VibrationGrid` or None (then left out of the
+    JSON), ``actuator`` an :class:`~realpen.tactile.actuator.Actuator`, ``coupling`` a
+    :class:`~realpen.sound.coupling.Coupling`. ``format`` is set to the lowest format that
+    holds the profile (:func:`needed_format`); a format-2 document with a residual or a grid
+    is refused.
     """
 
-    format: Literal[2] = FORMAT
+    format: Literal[2, 3] | None = None
     name: str = Field(pattern=NAME_PATTERN)
     tool: str
     description: str = ""
     tactile: TactileField
+    grid: GridField | None = None
     sound: SoundSection
     actuator: ActuatorField
     coupling: CouplingField
     files: BundleFiles
     provenance: Provenance
+
+    @model_validator(mode="after")
+    def _format_and_grid(self) -> ProfileMeta:
+        needed = needed_format(self.tactile, self.grid)
+        if self.format is not None and self.format < needed:
+            what = "a grid" if self.grid is not None else "a residual"
+            raise ValueError(f"format: a profile with {what} is format {needed}, not "
+                             f"{self.format}")
+        self.format = needed
+        if self.grid is not None and self.grid.reference_pattern != self.tactile:
+            raise ValueError(f"grid: the pattern of the reference point "
+                             f"({self.grid.reference}) is not the tactile section")
+        return self
+
+    @model_serializer(mode="wrap")
+    def _without_empty_grid(self, handler: SerializerFunctionWrapHandler) -> dict:
+        data = handler(self)
+        if data.get("grid", 0) is None:  # format 2 has no grid key: its bytes stay as they were
+            del data["grid"]
+        return data
 
     @model_validator(mode="after")
     def _files_agree(self) -> ProfileMeta:
