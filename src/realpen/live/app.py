@@ -9,6 +9,7 @@ and :class:`~realpen.live.auth.SecurityHeaders`, which adds the security headers
 ``GET /api/profiles``                        the pens offered (name, version, coupling, …)
 ``GET /api/profiles/{name}/sound.wav``       a pen's sound unit (32-bit float WAV)
 ``GET /api/profiles/{name}/tactile.wav``     a pen's tactile pattern (32-bit float WAV)
+``GET /api/profiles/{name}/grid/{i}.wav``    the loop of point i of a pen's vibration grid
 ``GET /api/device/log?since=N&limit=M``      the simulated device's command log, a page of at
                                              most :data:`DEVICE_LOG_PAGE` entries at a time
 ``GET /api/status``                          pages connected, strokes and samples stored
@@ -25,6 +26,7 @@ from pathlib import Path
 from typing import Literal
 
 from fastapi import FastAPI, HTTPException, Query, Request, WebSocket, WebSocketDisconnect
+from fastapi import Path as PathParam
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
@@ -191,6 +193,18 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
         data = entry.sound_wav if part == "sound" else entry.tactile_wav
         return Response(data, media_type="audio/wav",
                         headers={**NO_CACHE, "ETag": f'"{entry.profile.version}-{part}"'})
+
+    @app.get("/api/profiles/{name}/grid/{index}.wav")
+    def grid_audio(name: str, index: int = PathParam(ge=0)) -> Response:
+        entry = catalog.get(name)
+        if entry is None:
+            raise HTTPException(404, f"no profile '{name}'")
+        try:
+            data = entry.point_wav(index)
+        except IndexError:
+            raise HTTPException(404, f"the profile '{name}' has no grid point {index}") from None
+        return Response(data, media_type="audio/wav",
+                        headers={**NO_CACHE, "ETag": f'"{entry.profile.version}-grid-{index}"'})
 
     @app.get("/api/device/log")
     def device_log(since: int = Query(0, ge=0, le=2**53),

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
@@ -59,6 +59,7 @@ class CatalogEntry:
 
     profile: PenProfile
     where: str
+    _point_wavs: dict[int, bytes] = field(default_factory=dict, repr=False)
 
     @property
     def sound_rate(self) -> int:
@@ -86,6 +87,37 @@ class CatalogEntry:
         return playable_wav(self.profile.tactile, self.profile.meta.tactile.rate,
                             self.profile.meta.sound.rate, f"{self.profile.name} tactile pattern")
 
+    @cached_property
+    def grid(self):
+        """The profile's :class:`~realpen.tactile.grid.VibrationGrid` when it has more than one
+        point (the page then mixes one loop per point), else None (one loop, as ever)."""
+        grid = self.profile.grid
+        return grid if len(grid.points) > 1 else None
+
+    def point_rate(self, index: int) -> int:
+        """The rate grid point ``index``'s loop is served at (as :attr:`tactile_rate`)."""
+        pattern = self.grid.points[index].pattern
+        return playable_rate(pattern.frames, pattern.rate, self.profile.meta.sound.rate)
+
+    def point_wav(self, index: int) -> bytes:
+        """Grid point ``index``'s loop as a 32-bit float WAV at :meth:`point_rate`, rendered
+        from its pattern once and kept (the reference point's is :attr:`tactile_wav`).
+
+        Raises:
+            IndexError: no such point (or no grid).
+        """
+        if self.grid is None or not 0 <= index < len(self.grid.points):
+            raise IndexError(index)
+        if index == self.grid.reference:
+            return self.tactile_wav
+        cached = self._point_wavs.get(index)
+        if cached is None:
+            pattern = self.grid.points[index].pattern
+            cached = playable_wav(pattern.render(), pattern.rate, self.profile.meta.sound.rate,
+                                  f"{self.profile.name} tactile pattern at grid point {index}")
+            self._point_wavs[index] = cached  # two threads may both render it: same bytes
+        return cached
+
     def check(self) -> None:
         """Refuse a profile whose loops would be too long to serve.
 
@@ -97,9 +129,12 @@ class CatalogEntry:
             RealPenError: naming the bundle and the loop.
         """
         meta = self.profile.meta
-        for what, frames, rate, served in (
-                ("tactile pattern", meta.tactile.frames, meta.tactile.rate, self.tactile_rate),
-                ("sound unit", meta.sound.frames, meta.sound.rate, self.sound_rate)):
+        loops = [("tactile pattern", meta.tactile.frames, meta.tactile.rate, self.tactile_rate),
+                 ("sound unit", meta.sound.frames, meta.sound.rate, self.sound_rate)]
+        for index, point in enumerate(self.grid.points if self.grid else ()):
+            loops.append((f"tactile pattern at grid point {index}", point.pattern.frames,
+                          point.pattern.rate, self.point_rate(index)))
+        for what, frames, rate, served in loops:
             length = frames * served // rate
             if length > MAX_WAV_FRAMES:
                 raise fail(self.profile.path or self.profile.name,
@@ -109,7 +144,13 @@ class CatalogEntry:
     def to_json(self) -> dict:
         """The entry as the page reads it (``GET /api/profiles``): the pen, its version and
         coupling, and where to fetch its sound and tactile loops; ``tactile`` describes the
-        :class:`~realpen.tactile.pattern.TactilePattern` (rate, frames, sub-patterns)."""
+        :class:`~realpen.tactile.pattern.TactilePattern` (rate, frames, sub-patterns).
+
+        A profile whose grid has more than one point also has ``grid``: its points (speed in
+        mm/s, force in N, the rate and URL of the point's loop), the Delaunay ``triangles``
+        over them (index triples), ``scale`` (mm/s and N: each axis is divided by it before
+        distances are measured, as the triangulation did), ``full_pressure_force_n`` (the force
+        at page pressure 1) and ``reference`` (the point whose loop is ``tactile``)."""
         meta = self.profile.meta
         pattern = meta.tactile
         name = self.profile.name
@@ -124,7 +165,20 @@ class CatalogEntry:
                         "subpattern_ms": pattern.subpattern_ms, "boundary": pattern.boundary,
                         "wav_rate": self.tactile_rate,
                         "url": f"api/profiles/{name}/tactile.wav"},
+            **({"grid": self._grid_json()} if self.grid is not None else {}),
         }
+
+    def _grid_json(self) -> dict:
+        grid, name = self.grid, self.profile.name
+        points = [{"speed_mm_s": p.speed_mm_s, "force_n": p.force_n,
+                   "wav_rate": self.point_rate(i),
+                   "url": (f"api/profiles/{name}/tactile.wav" if i == grid.reference
+                           else f"api/profiles/{name}/grid/{i}.wav")}
+                  for i, p in enumerate(grid.points)]
+        return {"points": points, "triangles": grid.triangles.tolist(),
+                "scale": [float(s) for s in grid.scale],
+                "full_pressure_force_n": grid.full_pressure_force_n,
+                "reference": grid.reference, "mix_gain": grid.mix_gain}
 
 
 class Catalog:

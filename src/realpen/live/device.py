@@ -3,7 +3,10 @@
 The server tells the pen's actuator three things, in the order the page sent them:
 
 ``pen_down``  a stroke starts with a profile (whose tactile pattern the actuator loops) and
-              whether the modality includes touch;
+              whether the modality includes touch. A profile with a vibration grid
+              (``profile.grid``) is passed whole, but the commands carry no speed or force, so
+              a device cannot follow the grid from them: it plays the reference pattern
+              (``tactile.wav``). :class:`SimulatedDevice` logs the pen and ignores the grid;
 ``gain``      a new target gain (Eq. 1 before smoothing; the device smooths with the profile's
               ``coupling.smoothing_ms`` and scales ``a_max`` to its full drive). Sent only
               while a stroke whose modality includes touch is down;

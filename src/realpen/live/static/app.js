@@ -8,7 +8,9 @@
 // window.realpen exposes the live state for tests and for the curious: pen, modality, ink,
 // calibration, the latest pressure and speed, the Eq. 1 target gain, the smoothed gain (the
 // documented recursion on the event clock) and the audio gain actually applied, a trace of every
-// sample, and the coupling functions themselves (model.*).
+// sample, and the coupling functions themselves (model.*). With a pen whose profile has a
+// vibration grid, pointTargets and pointGains are the target and applied gains of each point's
+// tactile loop (model.VibrationGrid computes them).
 //
 // URL parameters preset the page for a study: ?pen=marker&modality=tactile&ink=hidden&tactile=audio
 //
@@ -22,6 +24,7 @@ import { AudioEngine, startOnActivation } from './audio.js';
 import { Ink, inkStyle } from './ink.js';
 import { Link } from './link.js';
 import { Writer, liveState } from './writer.js';
+import { VibrationGrid } from './grid.js';
 
 const MODALITIES = ['tactile', 'auditory', 'auditory-tactile', 'none'];
 const INKS = ['visible', 'hidden'];
@@ -68,7 +71,8 @@ const state = liveState({
   ink: pick(query.get('ink'), INKS, pick(saved.get('ink'), INKS, 'visible')),
   pxPerMm: saved.get('pxPerMm', CSS_PX_PER_MM),
   calibrated: saved.get('pxPerMm', null) !== null,
-  model: { gainRaw, playbackRate, alpha, onePole, MOUSE_PRESSURE, SPEED_WINDOW_MS, CSS_PX_PER_MM },
+  model: { gainRaw, playbackRate, alpha, onePole, MOUSE_PRESSURE, SPEED_WINDOW_MS, CSS_PX_PER_MM,
+    VibrationGrid },
 });
 window.realpen = state;
 
@@ -81,6 +85,7 @@ let penRequest = 0;
 Object.defineProperties(state, {
   gain: { enumerable: true, get: () => audio.soundGain.gain.value },
   tactileGain: { enumerable: true, get: () => audio.tactileGain.gain.value },
+  pointGains: { enumerable: true, get: () => audio.report().pointGains },
   audio: { enumerable: true, get: () => audio.report() },
   link: { enumerable: true, get: () => link && link.stats },
   inkedPixels: { value: () => ink.inkedPixels() },
@@ -143,7 +148,8 @@ async function switchPen(chosen) {
   const request = ++penRequest;
   const decoded = await loadBuffers(chosen);
   if (request !== penRequest) return false;
-  Object.assign(state, { pen: chosen.name, profileVersion: chosen.version, coupling: chosen.coupling });
+  Object.assign(state, { pen: chosen.name, profileVersion: chosen.version, coupling: chosen.coupling,
+    pointTargets: null });
   smoother.configure(audio.sampleRate, chosen.coupling.smoothing_ms);
   audio.use(decoded, chosen.coupling, chosen.name);
   mark('pens', chosen.name);

@@ -4,6 +4,14 @@
 //                               └─ (on) → merger input 0 = LEFT ─┐
 //   tactile loop → tactileGain ──────── → merger input 1 = RIGHT ─┴→ destination
 //
+// A profile with a vibration grid (grid.js) has one tactile loop per (speed, force) point
+// instead: all start at the same instant, each through its own gain, sqrt(w_i) at the pen's
+// speed and force (smoothed like the other gains, with the profile's time constant), into
+// tactileGain (realpen.tactile.stroke renders the same mix offline):
+//
+//   point i loop → pointGains[i] ─┐
+//   point j loop → pointGains[j] ─┴→ tactileGain → …
+//
 // With tactile over audio on, the right channel drives an actuator through an amplifier (the
 // common research set-up) and the left channel carries the sound. The context is created with
 // the interactive latency hint; browsers keep it suspended until the page has user activation,
@@ -14,7 +22,16 @@
 //
 // Levels: the sound unit is normalised to -20 dBFS RMS, so gain 1 plays it at that level; the
 // tactile pattern is peak-normalised, so its gain is the Eq. 1 gain over a_max (full drive at
-// a_max) and never clips.
+// a_max) and never clips. A grid's mix keeps the power of one loop (equal-power gains of
+// uncorrelated loops) but not its peak: where the loops happen to align it can reach the sum of
+// the gains times their peak (up to √3 between three points). The grid bus therefore carries
+// the grid's mix_gain (VibrationGrid.mix_gain: the mix peaks no higher than its loudest loop).
+
+import { VibrationGrid } from './grid.js';
+
+// The point loops start this long after `use` is called, all at that one instant: a start time
+// already past would start each at whichever render quantum its start() reached.
+const SYNC_LEAD_S = 0.02;
 
 export class AudioEngine {
   constructor() {
@@ -26,6 +43,9 @@ export class AudioEngine {
     this.merger.connect(this.ctx.destination);
     this.tactileAudio = null;
     this.sources = [];
+    this.tactileSources = [];
+    this.pointGains = [];
+    this.grid = null;
     this.sound = null;
     this.playing = null;
     this.buffers = null;
@@ -63,12 +83,17 @@ export class AudioEngine {
   }
 
   /** Decode a profile's sound unit and tactile pattern (the server sends both at 3 kHz or
-   *  more, which every browser decodes; Web Audio resamples them to the context's rate).
-   *  Rejects (e.g. EncodingError) when either does not decode. */
+   *  more, which every browser decodes; Web Audio resamples them to the context's rate), or,
+   *  for a profile with a vibration grid, every point's loop (`points`, with `grid`; `tactile`
+   *  is then the reference point's). Rejects (e.g. EncodingError) when any does not decode. */
   async load(profile, fetchBytes) {
-    const [sound, tactile] = await Promise.all([profile.sound.url, profile.tactile.url].map(
+    const grid = profile.grid ? new VibrationGrid(profile.grid) : null;
+    const urls = grid ? profile.grid.points.map((p) => p.url) : [profile.tactile.url];
+    const [sound, ...tactile] = await Promise.all([profile.sound.url, ...urls].map(
       async (url) => this.ctx.decodeAudioData(await fetchBytes(url))));
-    return { sound, tactile };
+    if (!grid) return { sound, tactile: tactile[0] };
+    return { sound, tactile: tactile[grid.reference], points: tactile, grid,
+      mixGain: profile.grid.mix_gain ?? 1 };
   }
 
   /** Loop these buffers (of the pen `name`) from now on, replacing the previous pen's. */
@@ -77,16 +102,50 @@ export class AudioEngine {
       try { source.stop(); } catch { /* never started */ }
       source.disconnect();
     }
+    for (const gain of this.pointGains) gain.disconnect();
+    if (this.gridBus) this.gridBus.disconnect();
+    this.gridBus = null;
     this.tau = coupling.smoothing_ms / 1000;
     this.sound = new AudioBufferSourceNode(this.ctx, { buffer: buffers.sound, loop: true });
-    const tactile = new AudioBufferSourceNode(this.ctx, { buffer: buffers.tactile, loop: true });
     this.sound.connect(this.soundGain);
-    tactile.connect(this.tactileGain);
     this.sound.start();
-    tactile.start();
-    this.sources = [this.sound, tactile];
+    this.grid = buffers.grid || null;
+    const loops = this.grid ? buffers.points : [buffers.tactile];
+    this.tactileSources = loops.map((buffer) => new AudioBufferSourceNode(this.ctx,
+      { buffer, loop: true }));
+    if (this.grid) {
+      // Until the pen says otherwise, the reference point (the profile's own tactile pattern).
+      this.pointGains = loops.map((_, i) => new GainNode(this.ctx,
+        { gain: i === this.grid.reference ? 1 : 0 }));
+      this.gridBus = new GainNode(this.ctx, { gain: buffers.mixGain ?? 1 });
+      this.gridBus.connect(this.tactileGain);
+      this.pointGains.forEach((gain, i) => {
+        this.tactileSources[i].connect(gain);
+        gain.connect(this.gridBus);
+      });
+      const at = this.ctx.currentTime + SYNC_LEAD_S;
+      for (const source of this.tactileSources) source.start(at);
+    } else {
+      this.pointGains = [];
+      this.tactileSources[0].connect(this.tactileGain);
+      this.tactileSources[0].start();
+    }
+    this.sources = [this.sound, ...this.tactileSources];
     this.playing = name;
     this.buffers = buffers;
+  }
+
+  /** The pen's speed (mm/s) and pressure (0-1): new targets for the point gains of a grid.
+   *  Returns the targets (sqrt of the weights, one per point), or null without a grid. */
+  follow(speed, pressure) {
+    if (!this.grid) return null;
+    const targets = this.grid.gains(speed, this.grid.forceOf(pressure));
+    const now = this.ctx.currentTime;
+    this.pointGains.forEach((gain, i) => {
+      if (this.tau > 0) gain.gain.setTargetAtTime(targets[i], now, this.tau);
+      else gain.gain.setValueAtTime(targets[i], now);
+    });
+    return targets;
   }
 
   /** Tactile pattern on the right channel (sound on the left), or no tactile audio. */
@@ -124,8 +183,13 @@ export class AudioEngine {
       tactileGain: this.tactileGain.gain.value,
       tactileAudio: this.tactileAudio,
       playing: this.playing,
-      buffers: this.buffers && Object.fromEntries(Object.entries(this.buffers).map(
-        ([part, b]) => [part, { sampleRate: b.sampleRate, length: b.length, duration: b.duration }])),
+      tactileLoops: this.tactileSources.length,
+      pointGains: this.grid ? this.pointGains.map((gain) => gain.gain.value) : null,
+      mixGain: this.gridBus ? this.gridBus.gain.value : null,
+      buffers: this.buffers && Object.fromEntries(['sound', 'tactile'].map((part) => {
+        const b = this.buffers[part];
+        return [part, { sampleRate: b.sampleRate, length: b.length, duration: b.duration }];
+      })),
     };
   }
 }

@@ -6,7 +6,9 @@
 // The writer reads the page's live state (pen, profileVersion, coupling, profiles, modality,
 // ink, tactileAudio, pxPerMm, calibrated, config) and writes into it what tests and status bars
 // read (stroke, strokes, down, pointerType, pressure, speed, tiltX, tiltY, targetGain,
-// smoothedGain, tactileTarget, playbackRate, trace).
+// smoothedGain, tactileTarget, pointTargets, playbackRate, trace). pointTargets: with a pen whose
+// profile has a vibration grid, the target gain of each point's tactile loop at the latest
+// sample's speed and force (audio.js, grid.js); null otherwise.
 
 import { gainRaw, playbackRate } from './coupling.js';
 import { CSS_PX_PER_MM, PenTracker } from './pen.js';
@@ -44,6 +46,7 @@ export function liveState(fields) {
     targetGain: 0,
     smoothedGain: 0,
     tactileTarget: 0,
+    pointTargets: null,
     playbackRate: 1,
     trace: [],
     ...fields,
@@ -93,6 +96,7 @@ export class Writer {
       tiltY: last.tilt_y, targetGain: target, playbackRate: playbackRate(c, last.speed) });
     state.tactileTarget = tactileOn(state.modality) && state.tactileAudio ? target / c.a_max : 0;
     this.audio.set(soundOn(state.modality) ? target : 0, state.tactileTarget, state.playbackRate);
+    state.pointTargets = this.audio.follow(last.speed, last.pressure);
     if (target !== this.lastSentTarget) {
       this.link.send({ type: 'gain', stroke: state.stroke, t: last.t, target });
       this.lastSentTarget = target;
