@@ -2,9 +2,11 @@
 
 Targets are Penn HaTT texture models (Culbertson, Lopez Delgado and Kuchenbecker, IEEE Haptics
 Symposium 2014; read from ../shared/data/hatt_models, never copied): stylus acceleration
-synthesised at (speed, force) points that are *not* model vertices, so no method is built from
-the very model it is judged against. At each point a "recording" (8 s, one noise seed) is what
-every method builds from, and the target is 30 s of the same point with another seed.
+synthesised at (speed, force) points that are not model vertices (the toolkit blends the
+neighbouring vertices' models there). At each point a "recording" (8 s, one noise seed) is what
+every method builds from, and the target is 30 s of the same blended model with another seed:
+what is held out is the noise realisation, the way a second pass of the same pen differs from
+the first. Every method builds from the same recording, so the comparison between them is fair.
 
 Each method's loop is played through the same actuator model (LRA, f0 175 Hz, Q 8; the loops
 are pre-equalised for it with the 20 dB cap) and compared with the target by the measures of
@@ -19,7 +21,8 @@ Methods:
 - B sines+residual: B plus the stochastic residual (spectral modelling synthesis);
 - single model: MakeSense-style, 10 peaks of the whole recording in one loop (one model for the
   whole recording, as its description says; built here with the same peak picking and
-  equalisation);
+  equalisation; its loop is the recording's length less two units, 7.8 s, and the peaks of so
+  long a unit may lie 0.13 Hz apart);
 - noise loop: the floor — a 1.5 s loop of noise with the target's own model spectrum,
   pre-equalised with the same cap.
 

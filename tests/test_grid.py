@@ -246,9 +246,10 @@ def test_the_mix_never_peaks_above_the_loudest_loop():
     loops = np.stack([p.samples for p in grid.patterns])
     loudest = np.max(np.abs(loops))
     rng = np.random.default_rng(3)
-    for speed, force in rng.uniform([0, 0], [220, 4.5], (40, 2)):
-        mix = grid.mix_gain * (grid.gains(speed, force) @ loops)
-        assert np.max(np.abs(mix)) <= loudest * 1.02  # measured at centroids and midpoints
+    peaks = [np.max(np.abs(grid.mix_gain * (grid.gains(speed, force) @ loops)))
+             for speed, force in rng.uniform([0, 0], [220, 4.5], (60, 2))]
+    assert max(peaks) <= loudest * (1 + 1e-9)  # the bound is exact, not sampled
+    assert max(peaks) > 0.9 * loudest  # and not needlessly low
 
 
 def test_point_gains_start_at_the_reference_and_hold_while_lifted():

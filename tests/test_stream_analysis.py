@@ -219,6 +219,18 @@ def test_the_high_pass_scales_a_tone_near_its_cutoff_without_moving_it(tone):
     assert np.max(np.abs(10 * np.log10(new.powers[inner, 0] / old.powers[inner, 0]))) < 0.2
 
 
+@pytest.mark.parametrize("tone", [10.0, 15.0])
+def test_without_a_high_pass_low_tones_are_kept_as_they_are(tone):
+    """highpass_hz=0: only each unit's mean goes, as in the whole-signal path (a parabola
+    would bend a 10 Hz tone in a 100 ms unit by several dB)."""
+    x = np.sin(2 * np.pi * tone * np.arange(int(3 * RATE)) / RATE + 0.3)
+    old = analyze(prepare(Recording(x, RATE, ("x",)), highpass_hz=0).mono, RATE, top=1, fmin=0)
+    new = analyze_units(x, RATE, top=1, highpass_hz=0, dtype=np.float64)
+    inner = slice(1, -1)
+    assert np.max(np.abs(new.frequencies_hz[inner, 0] - old.frequencies_hz[inner, 0])) < 0.5
+    assert np.max(np.abs(10 * np.log10(new.powers[inner, 0] / old.powers[inner, 0]))) < 0.5
+
+
 def test_slow_hand_motion_hides_no_low_tone():
     """2 m/s² of motion at 0.7–2.3 Hz on every axis (the whole-signal high-pass removes it
     before any window; here each unit's parabolic trend goes): a 0.01 m/s² tone at 40 Hz is

@@ -33,8 +33,9 @@ CONDITION_HELP = ("Study-1 preset: A=5×15×100ms, B=10×15×100ms, C=15×15×10
 MODELS = ("sines", "sines+residual")
 RECOMMENDED_MODEL = "sines+residual"
 MODEL_HELP = ("sines+residual (the default: the method's principal frequencies plus the noise "
-              "floor between them, as shaped noise; closer to the real pen) | sines (the "
-              "method exactly, as in the study's conditions A–F).")
+              "floor between them, as shaped noise; a felt spectrum 2.3× closer to real paper "
+              "in bench_fidelity) | sines (the method exactly, as in the study's conditions "
+              "A–F).")
 
 
 def model_option():

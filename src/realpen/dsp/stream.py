@@ -71,7 +71,8 @@ that a batch's spectra stay in the CPU's cache (512 × 3 axes × 256 points)."""
 SILENCE_DB = -80.0  # as realpen.dsp.filters.SILENCE_DB: vibration this far below the peak is none
 _HIGHPASS_ORDER = 4  # one pass of realpen.dsp.filters.highpass
 TREND_ORDER = 2
-"""Degree of the polynomial trend removed from each unit (2: a parabola; 0 would be the mean)."""
+"""Degree of the polynomial trend removed from each unit with a high-pass (2: a parabola);
+without one (``highpass_hz=0``) only the mean is removed."""
 
 
 def unit_fft_size(unit_samples: int) -> int:
@@ -113,7 +114,9 @@ class _Plan:
         # The unit's trend up to a parabola is removed, not only its mean: slow hand motion
         # (metres per second squared at a few Hz, which the whole-signal high-pass removes
         # before any window) would otherwise leak through the window into the lowest bins.
-        self.trend = _orthonormal_polynomials(unit_samples, TREND_ORDER)
+        # Without a high-pass (highpass_hz = 0) the low frequencies are wanted as they are: only
+        # the mean goes, as in the whole-signal path.
+        self.trend = _orthonormal_polynomials(unit_samples, TREND_ORDER if highpass_hz > 0 else 0)
         # Parseval for the one-sided padded spectrum, divided by the window's energy: the
         # mean square of the (filtered) unit, for the silence check.
         parseval = np.full(len(freqs), 2.0)

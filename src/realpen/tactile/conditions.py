@@ -36,10 +36,12 @@ AMPLITUDE_MODES = ("sqrt", "power")
 SELECTIONS = ("stationary", "middle")
 MODELS = ("sines", "sines+residual")  # the method's sinusoids; plus the stochastic residual
 RECOMMENDED_MODEL = "sines+residual"
-"""The model the command line builds with unless told otherwise: on held-out HaTT paper
-textures it comes 2.6× closer to the real vibration than the method's sines
-(``benchmarks/bench_fidelity.py``). :class:`TactileParams` itself defaults to ``"sines"``, the
-method, and the study's conditions A–F always use it."""
+"""The model the command line builds with unless told otherwise: on HaTT paper textures its
+felt spectrum is 2.3× closer to the real vibration than the method's sines in the
+sensitivity-weighted log-spectral distance (median 3.30 against 7.64 dB; 1/3-octave band
+levels about equal, 6.59 against 6.46 dB; ``benchmarks/bench_fidelity.py``).
+:class:`TactileParams` itself defaults to ``"sines"``, the method, and the study's conditions
+A–F always use it."""
 _COUNTS = ("top", "subpatterns", "unit_ms")
 _MAXIMA = {"top": MAX_TOP, "subpatterns": MAX_SUBPATTERNS, "unit_ms": MAX_UNIT_MS}
 

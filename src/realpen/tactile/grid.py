@@ -321,13 +321,14 @@ class VibrationGrid:
 
     @property
     def mix_gain(self) -> float:
-        """Gain (≤ 1) on the whole mix so that it peaks no higher than the loudest single loop.
+        """Gain (≤ 1) on the whole mix so that it never peaks higher than the loudest single loop.
 
-        Equal-power gains keep the mix's power but not its peak: where loops happen to align,
-        the mix of three can reach √3 times a loop's peak. The mix is measured at every point,
-        every edge's midpoint and every triangle's centroid (at the patterns' own rate), and
-        this gain brings its highest peak down to the highest single loop's, which is
-        normalised below full scale. 1 for a single point. Computed once.
+        Equal-power gains keep the mix's power but not its peak: where loops align, the mix of
+        three can reach √3 times a loop's peak. For each triangle (or neighbours on a line) the
+        highest peak over every choice of weights is, at each instant, the norm of the loops'
+        positive (or negative) values; this gain brings the highest of those down to the
+        loudest loop's peak, which is normalised below full scale. 1 for a single point.
+        Computed once.
         """
         cached = self.__dict__.get("_mix_gain")
         if cached is None:
@@ -381,16 +382,17 @@ def _mix_gain(grid: VibrationGrid) -> float:
     loops = np.stack([np.asarray(p.samples, dtype=np.float64) for p in grid.patterns])
     loudest = float(np.max(np.abs(loops)))
     geo = grid._geo()
-    if geo.kind == "line":  # neighbours along the line
+    if geo.kind == "line":  # only neighbours along the line mix
         groups = [[int(a), int(b)] for a, b in zip(geo.order[:-1], geo.order[1:])]
-    else:
+    else:  # only a triangle's corners mix (outside the hull: an edge's, within a triangle)
         groups = [list(tri) for tri in geo.triangles]
-        groups += [[int(tri[a]), int(tri[b])] for tri in geo.triangles
-                   for a, b in ((0, 1), (1, 2), (0, 2))]
     highest = loudest
-    for group in groups:  # the mix at a midpoint or centroid: equal weights
-        mix = np.sqrt(1.0 / len(group)) * loops[group].sum(axis=0)
-        highest = max(highest, float(np.max(np.abs(mix))))
+    for group in groups:
+        # At each instant the largest Σ sqrt(w_i) x_i over weights summing to 1 is the norm of
+        # the positive x_i (Cauchy-Schwarz), and likewise below zero: the exact worst case.
+        part = loops[group]
+        for signed in (np.clip(part, 0.0, None), np.clip(-part, 0.0, None)):
+            highest = max(highest, float(np.sqrt(np.max(np.sum(signed ** 2, axis=0)))))
     return loudest / highest if highest > 0 else 1.0
 
 
