@@ -409,6 +409,11 @@ CORPUS = [
         grid_csv("speed_mm_s,force_n,path\n50,1,none.wav\n")),
     bad("profile-build-grid-garbage-recording", GRID_BUILD, "garbage.npz",
         grid_csv("speed_mm_s,force_n,path\n50,1,garbage.npz\n80,1,rec.npz\n")),
+    bad("profile-build-grid-lists-itself", GRID_BUILD, ("grid.csv", "line 3", "itself"),
+        grid_csv("speed_mm_s,force_n,path\n50,1,rec.npz\n80,1,grid.csv\n")),
+    # A 44.1 kHz sound as a point's vibration: the row's file is named with the rate's problem.
+    bad("profile-build-grid-point-too-fast-for-the-rate", GRID_BUILD, ("--rate", "point 1",
+        "rec.wav"), grid_csv("speed_mm_s,force_n,path\n50,1,rec.npz\n80,1,rec.wav\n")),
     bad("profile-build-garbage-hatt", "profile build --name mine --sound rec.wav -o out.zip "
         "--hatt garbage.xml", "garbage.xml"),
     bad("tactile-render-garbage-profile", "tactile render garbage.zip --trajectory t.csv "

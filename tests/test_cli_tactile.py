@@ -63,6 +63,11 @@ def test_tactile_builds_the_residual_by_default_and_the_method_with_model_sines(
     assert len(reports[None]["residual"]["levels"]) == 15
     assert "residual" not in reports["sines"] and "model" not in reports["sines"]["parameters"]
     assert reports[None]["subpatterns"] != reports["sines"]["subpatterns"]  # gains differ
+    # A study condition is the method's stimulus unless a model is asked for.
+    js = tmp_path / "d.json"
+    assert run_cli("tactile", EXAMPLE, "--condition", "D", "-o", tmp_path / "d.wav", "--json",
+                   js).returncode == 0
+    assert "residual" not in json.loads(js.read_text())
     assert [[c["frequency_hz"] for c in sub] for sub in reports[None]["subpatterns"]] == \
         [[c["frequency_hz"] for c in sub] for sub in reports["sines"]["subpatterns"]]
 

@@ -394,3 +394,21 @@ def test_build_profile_takes_points_and_a_reference(tmp_path):
     one = build_profile("one", "pen", recordings[:1], load_sound(sound), "flat")
     assert one.meta.format == 2 and one.meta.grid is None  # one point is no grid
     assert replace(one.grid, notes=()).points[0].pattern == one.pattern
+
+
+def test_a_grid_refuses_patterns_louder_than_full_scale():
+    loud = TactilePattern([[Component(100.0 + 10 * k, 1.0) for k in range(4)]] * 3, RATE)
+    with pytest.raises(ParameterError, match="point 1.*full"):
+        VibrationGrid((GridPoint(20, 1, tone(100)), GridPoint(100, 1, loud)))
+
+
+def test_every_export_says_it_carries_only_the_reference_point():
+    from realpen.exports import FORMATS, render
+
+    profile = grid_profile()
+    for fmt in FORMATS:
+        limits = render(fmt, profile).limits
+        assert any("vibration grid (3 points" in limit and "60 mm/s" in limit
+                   for limit in limits), fmt
+    single = load_profile(bundled_dir() / "pencil")
+    assert not any("grid" in limit for limit in render("wav", single).limits)

@@ -308,3 +308,16 @@ def test_study_conditions_stay_sines_for_a_profile_built_with_the_residual():
     rebuilt = condition_pattern(residual_pen, {"condition": "B"})
     assert rebuilt.residual is None and rebuilt.params.model == "sines"
     assert np.allclose(rebuilt.samples, pen.tactile, atol=1e-4)
+
+
+def test_a_pattern_refuses_a_residual_above_its_nyquist_or_louder_than_full_scale():
+    from realpen.tactile.pattern import Component, TactilePattern
+    from realpen.tactile.residual import Residual
+
+    sines = [[Component(100.0, 0.1)]] * 2
+    fine = Residual([30.0, 100.0, 400.0], [[1e-3, 1e-3]] * 2, 0)
+    assert TactilePattern(sines, 8000, residual=fine).residual == fine
+    with pytest.raises(ParameterError, match="residual: has bands up to 5000 Hz"):
+        TactilePattern(sines, 8000, residual=Residual([30.0, 100.0, 5000.0], [[1e-3, 1e-3]] * 2, 0))
+    with pytest.raises(ParameterError, match="residual: carries a mean-square power"):
+        TactilePattern(sines, 8000, residual=Residual([30.0, 100.0, 400.0], [[1.0, 1.0]] * 2, 0))

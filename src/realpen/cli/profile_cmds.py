@@ -94,7 +94,7 @@ def build(
     check_outputs(output, force=force, folders=True, inputs=inputs)
     params = TactileParams.resolve(condition, top, subpatterns, unit_ms, rate=rate,
                                    boundary=boundary, seed=seed, cap_db=cap_db, axis=axis,
-                                   analysis_rate=analysis_rate, **model_options(model))
+                                   analysis_rate=analysis_rate, **model_options(model, condition))
     response = parse_actuator(actuator)
     constants = Coupling.load(coupling) if coupling is not None else Coupling()
     if vibration_grid is not None:

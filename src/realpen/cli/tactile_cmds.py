@@ -34,19 +34,23 @@ MODELS = ("sines", "sines+residual")
 RECOMMENDED_MODEL = "sines+residual"
 MODEL_HELP = ("sines+residual (the default: the method's principal frequencies plus the noise "
               "floor between them, as shaped noise; a felt spectrum 2.3× closer to real paper "
-              "in bench_fidelity) | sines (the method exactly, as in the study's conditions "
-              "A–F).")
+              "in bench_fidelity) | sines (the method exactly; the default with --condition, "
+              "whose A–F are the study's stimuli).")
 
 
 def model_option():
-    """The ``--model`` option of the commands that build patterns (default: the recommended
-    model, sines+residual)."""
-    return typer.Option(RECOMMENDED_MODEL, "--model", help=MODEL_HELP)
+    """The ``--model`` option of the commands that build patterns (default: sines+residual,
+    or sines with a study condition)."""
+    return typer.Option(None, "--model", help=MODEL_HELP, show_default=False)
 
 
-def model_options(model: str | None) -> dict:
-    """``model=`` for :class:`~realpen.tactile.conditions.TactileParams`, when one was given."""
-    return {} if model is None else {"model": model}
+def model_options(model: str | None, condition: str | None) -> dict:
+    """``model=`` for :class:`~realpen.tactile.conditions.TactileParams`: the one given, else
+    the method's sines for a study condition (A–F are the study's stimuli) and the
+    recommended model otherwise."""
+    if model is None:
+        model = "sines" if condition is not None else RECOMMENDED_MODEL
+    return {"model": model}
 
 
 class _BuildByDefault(DefaultCommandGroup):
@@ -88,7 +92,8 @@ def analyze(
 ) -> None:
     """Print the principal frequencies of the selected unit sequences (--all: of every unit).
 
-    The recording is read in blocks: memory does not grow with its length.
+    The recording is read in blocks: memory grows only with the per-unit results (about 7 MB
+    an hour of recording; --all prints a table of every unit, which takes more).
     Each unit's DFT321 power spectrum is the sum of its axes' unit spectra.
     --analysis-rate resamples the whole recording in memory first.
     """
@@ -189,7 +194,7 @@ def tactile(
                                    boundary=boundary, crossfade_ms=crossfade_ms,
                                    amplitude=amplitude, seed=seed, cap_db=cap_db,
                                    selection=select, highpass_hz=highpass_hz, axis=axis,
-                                   analysis_rate=analysis_rate, **model_options(model))
+                                   analysis_rate=analysis_rate, **model_options(model, condition))
     loaded = load_recording(recording, rate=input_rate)
     with progress_bar("analysing", loaded.duration > PROGRESS_AFTER_S) as progress:
         pattern = build_pattern(loaded, response, params, progress)

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import inspect
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import ModuleType
 
@@ -136,8 +136,10 @@ def render(fmt: str, pattern, sound=None, coupling=None, **options) -> Export:
     """
     module = _module(fmt)
     given = {name: value for name, value in options.items() if value is not None}
+    grid_limits: tuple[str, ...] = ()
     if not hasattr(pattern, "subpatterns") and hasattr(pattern, "pattern") \
             and hasattr(pattern, "sound_loop"):  # a PenProfile
+        grid_limits = _grid_limits(pattern)
         inputs = profile_inputs(pattern)
         pattern = inputs.pop("pattern")
         own_sound, own_coupling = inputs.pop("sound"), inputs.pop("coupling")
@@ -148,7 +150,19 @@ def render(fmt: str, pattern, sound=None, coupling=None, **options) -> Export:
     for name in given:
         if name not in accepted or name in ("pattern", "sound", "coupling"):
             raise ParameterError(name, f"not used by format '{fmt}'")
-    return module.export(pattern, sound, coupling, **given)
+    result = module.export(pattern, sound, coupling, **given)
+    return replace(result, limits=(*result.limits, *grid_limits)) if grid_limits else result
+
+
+def _grid_limits(profile) -> tuple[str, ...]:
+    """What every format says of a profile's vibration grid: only its reference pattern goes."""
+    grid = profile.meta.grid
+    if grid is None or len(grid.points) < 2:
+        return ()
+    point = grid.points[grid.reference]
+    return (f"the vibration grid ({len(grid.points)} points that the feel follows with speed and "
+            f"force); only the reference point's pattern ({point.speed_mm_s:g} mm/s, "
+            f"{point.force_n:g} N) is exported",)
 
 
 def export(fmt: str, out_path: str | os.PathLike, pattern, sound=None, coupling=None,

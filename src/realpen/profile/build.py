@@ -306,6 +306,8 @@ def read_grid_csv(path: str | os.PathLike) -> list[tuple[float, float, Path]]:
         recording = Path(given) if os.path.isabs(given) else path.parent / given
         if not recording.is_file():
             raise fail(path, f"line {number}: {given}: no such file")
+        if recording.resolve() == path.resolve():
+            raise fail(path, f"line {number}: the grid lists itself as a recording")
         rows.append((values[0], values[1], recording))
     if not rows:
         raise fail(path, "has a header but no points")

@@ -187,6 +187,15 @@ class VibrationGrid:
                 raise ParameterError("points", f"points {seen[key]} and {index} are both at "
                                                f"{key[0]:g} mm/s, {key[1]:g} N")
             seen[key] = index
+        # A single point plays its pattern's own samples (a profile's tactile.wav); several
+        # are mixed from their JSON, which must then be a playable level.
+        for index, point in enumerate(points if len(points) > 1 else ()):
+            power = _largest_power(point.pattern)
+            if power > 1.0:
+                raise ParameterError("points", f"the pattern of point {index} carries a "
+                                               f"mean-square power of {power:.3g} in a "
+                                               f"sub-pattern; a grid's patterns are at most full "
+                                               f"scale (1)")
         set_(self, "points", points)
         value = _number("full_pressure_force_n", self.full_pressure_force_n, MAX_FORCE_N)
         if value <= 0:
@@ -327,8 +336,8 @@ class VibrationGrid:
         three can reach √3 times a loop's peak. For each triangle (or neighbours on a line) the
         highest peak over every choice of weights is, at each instant, the norm of the loops'
         positive (or negative) values; this gain brings the highest of those down to the
-        loudest loop's peak, which is normalised below full scale. 1 for a single point.
-        Computed once.
+        loudest loop's peak (normalised below full scale; full scale, should a loop be louder).
+        1 for a single point. Computed once.
         """
         cached = self.__dict__.get("_mix_gain")
         if cached is None:
@@ -376,11 +385,20 @@ class VibrationGrid:
                    data.get("reference", 0), **origin)
 
 
+def _largest_power(pattern: TactilePattern) -> float:
+    """The largest mean-square power of a sub-pattern (full scale²): the sinusoids' a²/2 and
+    the residual's band powers."""
+    sines = max(sum(c.amplitude ** 2 / 2 for c in sub) for sub in pattern.subpatterns)
+    noise = 0.0 if pattern.residual is None else float(np.max(pattern.residual.powers))
+    return sines + noise
+
+
 def _mix_gain(grid: VibrationGrid) -> float:
     if len(grid.points) == 1:
         return 1.0
     loops = np.stack([np.asarray(p.samples, dtype=np.float64) for p in grid.patterns])
     loudest = float(np.max(np.abs(loops)))
+    allowed = min(loudest, 1.0)  # a loop above full scale (edited JSON) is brought down too
     geo = grid._geo()
     if geo.kind == "line":  # only neighbours along the line mix
         groups = [[int(a), int(b)] for a, b in zip(geo.order[:-1], geo.order[1:])]
@@ -393,7 +411,7 @@ def _mix_gain(grid: VibrationGrid) -> float:
         part = loops[group]
         for signed in (np.clip(part, 0.0, None), np.clip(-part, 0.0, None)):
             highest = max(highest, float(np.sqrt(np.max(np.sum(signed ** 2, axis=0)))))
-    return loudest / highest if highest > 0 else 1.0
+    return allowed / highest if highest > 0 else 1.0
 
 
 def _shape(pattern: TactilePattern) -> str:
@@ -565,7 +583,12 @@ def grid_from_recordings(points: Sequence[tuple[float, float, Recording]],
     params = _params(params, options)
     patterns = []
     for index, (speed, force, recording) in enumerate(checked):
-        patterns.append((speed, force, build_pattern(recording, actuator, params)))
+        try:
+            patterns.append((speed, force, build_pattern(recording, actuator, params)))
+        except ParameterError as error:  # which point's recording asked too much of a parameter
+            raise ParameterError(error.parameter, f"{error.problem} (point {index} at "
+                                                  f"{speed:g} mm/s, {force:g} N: "
+                                                  f"{recording.source})") from None
         if progress is not None:
             progress(index + 1, len(checked))
     sources = [{"role": "vibration", "name": Path(recording.source).name,

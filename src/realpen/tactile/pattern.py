@@ -283,6 +283,14 @@ class TactilePattern:
                 raise ParameterError("residual", f"has the levels of "
                                                  f"{len(self.residual.levels)} sub-pattern(s); "
                                                  f"the pattern has {len(self.subpatterns)}")
+            if self.residual.band_edges_hz[-1] > self.rate / 2:
+                raise ParameterError("residual", f"has bands up to "
+                                                 f"{self.residual.band_edges_hz[-1]:g} Hz, above "
+                                                 f"half the pattern's {self.rate} Hz")
+            loudest = float(np.max(self.residual.powers))
+            if loudest > 1.0:  # noise louder than a full-scale square wave cannot be played
+                raise ParameterError("residual", f"carries a mean-square power of {loudest:.3g} in "
+                                                 f"a sub-pattern; at most 1 (full scale)")
         set_(self, "provenance", dict(self.provenance or {}))
         set_(self, "notes", tuple(self.notes))
 
