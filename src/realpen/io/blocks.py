@@ -37,9 +37,6 @@ header says (audio, NPZ) and as the rows arrive otherwise (CSV, itself limited t
 
 from __future__ import annotations
 
-import csv
-import io
-import itertools
 import math
 import mmap
 import os
@@ -57,7 +54,6 @@ from realpen.io import csvtable
 from realpen.io.files import check_readable_file
 from realpen.io.limits import (
     MAX_CSV_BYTES,
-    MAX_NPY_HEADER_BYTES,
     MAX_RATE_HZ,
     MAX_SAMPLE_MAGNITUDE,
     MAX_STREAM_SAMPLES,
@@ -79,6 +75,9 @@ from realpen.io.recording import (
     _read_exactly,
     _read_npz_array,
     _wav_missing_bytes,
+    check_npz_method,
+    npz_metadata,
+    read_npy_header,
 )
 
 __all__ = ["RecordingStream", "ArrayStream", "open_stream", "MAX_STREAM_SAMPLES",
@@ -384,25 +383,8 @@ class _NpzStream(RecordingStream):
         except _NPZ_ERRORS as error:
             raise fail(path, f"not a readable NPZ archive ({error})") from None
         frames, channels = self.shape
-        if "rate" in contents:
-            stored = contents["rate"]
-            if stored.size != 1 or stored.dtype.kind not in "iuf":
-                raise fail(path, "'rate' must be one number in Hz")
-            rate = float(stored.reshape(()))
-            check_signal(path, rate, 0, channels)
-        elif rate is None:
-            raise ParameterError("rate", f"needed in Hz: {path} is an NPZ with no 'rate' array")
-        if "axes" in contents:
-            names = np.atleast_1d(contents["axes"])
-            if names.dtype.kind not in "US" or names.ndim != 1:
-                raise fail(path, "'axes' must be an array of axis names")
-            axes = tuple(str(a) for a in names)
-        else:
-            axes = _axis_names(channels)
-        if len(axes) != channels:
-            raise fail(path, f"NPZ names {len(axes)} axes for {channels} columns")
-        self.rate, self.axes = float(rate), axes
-        self.units = str(contents["units"]) if "units" in contents else "arbitrary"
+        # Frames are checked against the streaming limit (_layout), not the in-memory one.
+        self.rate, self.axes, self.units = npz_metadata(path, contents, rate, 0, channels)
         self.frames = self.frames_hint = frames
         if frames == 0:
             raise fail(path, "holds no samples")
@@ -411,24 +393,10 @@ class _NpzStream(RecordingStream):
         """The samples' .npy header, checked as the in-memory reader checks it, and where
         their data starts (in the member, and in the file when the member is stored)."""
         path, info, key = self.path, self.info, self.key
-        if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
-            raise fail(path, f"'{key}' is compressed with zip method {info.compress_type}; NPZ "
-                             f"arrays must be stored or deflated, as numpy writes them")
+        check_npz_method(path, info, key)
         with archive.open(info) as handle:
-            version = np.lib.format.read_magic(handle)
-            if version not in ((1, 0), (2, 0)):
-                raise fail(path, f"'{key}' is a .npy version {version[0]}.{version[1]} array; "
-                                 f"RealPen reads versions 1.0 and 2.0")
-            width = 2 if version == (1, 0) else 4
-            length_bytes = _read_exactly(handle, width, path, key)
-            length = int.from_bytes(length_bytes, "little")
-            if length > MAX_NPY_HEADER_BYTES:
-                raise fail(path, f"'{key}' declares a {length:,}-byte .npy header; headers are "
-                                 f"limited to {MAX_NPY_HEADER_BYTES:,} bytes")
-            header = io.BytesIO(length_bytes + _read_exactly(handle, length, path, key))
-            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
-                np.lib.format.read_array_header_2_0
-            shape, fortran, dtype = read_header(header)
+            shape, fortran, dtype = read_npy_header(handle, path, key)
+            data_start = handle.tell()  # in the member: magic, header length, header
         if dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None or \
                 dtype.kind not in "iuf" or dtype.itemsize == 0:
             raise fail(path, f"'{key}' must hold real numbers, not {dtype}")
@@ -442,7 +410,7 @@ class _NpzStream(RecordingStream):
         self.shape, self.dtype = (frames, channels), dtype
         # Fortran order keeps each axis together: it is read axis by axis, side by side.
         self.fortran = bool(fortran) and channels > 1
-        self.data_start = len(np.lib.format.MAGIC_PREFIX) + 2 + width + length  # in the member
+        self.data_start = data_start
         nbytes = frames * channels * dtype.itemsize
         if info.file_size < self.data_start + nbytes:
             raise fail(path, f"'{key}' is truncated: its header declares more data than the "
@@ -591,20 +559,7 @@ class _CsvStream(RecordingStream):
         path = self.path
         try:
             with open(path, encoding="utf-8-sig") as handle:
-                numbered = csvtable._lines(path, handle)
-                head = list(itertools.islice(numbered, csvtable.SNIFF_ROWS))
-                if not head:
-                    raise fail(path, "file holds only blank lines")
-                delimiter = csvtable._sniff(line for _, line in head)
-                where = [head[0][0], 0]
-
-                def texts() -> Iterator[str]:
-                    for number, line in itertools.chain(head, numbered):
-                        where[0] = number
-                        where[1] += len(line)
-                        yield line
-
-                rows = csvtable._rows(path, csv.reader(texts(), delimiter=delimiter), where)
+                rows, delimiter = csvtable.numbered_rows(path, handle)
                 first_line, names = next(rows)
                 if all(csvtable.is_number(cell, delimiter != ",") for cell in names):
                     raise fail(path, f"line {first_line}: CSV needs a header row naming its "

@@ -149,9 +149,13 @@ def read_csv(path: str | os.PathLike, columns: Sequence[str | int] | None = None
         raise fail(path, f"cannot read ({error.strerror or error})") from None
 
 
-def _read_rows(path: Path, handle, capacity: int, columns, header: bool | None, min_rows: int,
-               hint: str, optional: Sequence[str]) -> Table:
-    """The rows of an open CSV file, converted into arrays a block at a time."""
+def numbered_rows(path: Path, handle) -> tuple[Iterator[tuple[int, list[str]]], str]:
+    """The rows of an open CSV file as ``(line number, cells)``, and the delimiter sniffed from
+    its first rows; blank lines skipped, every length limit checked as the rows are read.
+
+    Raises:
+        RealPenError: a file of blank lines only (the rows raise as they meet a problem).
+    """
     numbered = _lines(path, handle)
     head = list(itertools.islice(numbered, SNIFF_ROWS))
     if not head:
@@ -167,7 +171,13 @@ def _read_rows(path: Path, handle, capacity: int, columns, header: bool | None, 
             where[1] += len(line)
             yield line
 
-    rows = _rows(path, csv.reader(texts(), delimiter=delimiter), where)
+    return _rows(path, csv.reader(texts(), delimiter=delimiter), where), delimiter
+
+
+def _read_rows(path: Path, handle, capacity: int, columns, header: bool | None, min_rows: int,
+               hint: str, optional: Sequence[str]) -> Table:
+    """The rows of an open CSV file, converted into arrays a block at a time."""
+    rows, delimiter = numbered_rows(path, handle)
     first_line, first = next(rows)
     if header is None:
         header = not is_number(first[0], delimiter != ",")

@@ -357,12 +357,21 @@ def _load_npz(path: Path, rate: float | None) -> Recording:
         raise fail(path, f"not a readable NPZ archive ({error})") from None
     if samples.ndim == 1:
         samples = samples[:, None]
+    rate, axes, units = npz_metadata(path, contents, rate, *samples.shape)
+    return Recording(samples, rate, axes, units=units)
+
+
+def npz_metadata(path: Path, contents: dict, rate: float | None, frames: int, channels: int
+                 ) -> tuple[float, tuple[str, ...], str]:
+    """(rate in Hz, axis names, units) of an NPZ recording from its small arrays ``contents``
+    (``rate``, ``axes``, ``units``; ``rate`` given here when the file has none), checked
+    against its samples' ``frames`` × ``channels``."""
     if "rate" in contents:
         stored = contents["rate"]
         if stored.size != 1 or stored.dtype.kind not in "iuf":
             raise fail(path, "'rate' must be one number in Hz")
         rate = float(stored.reshape(()))
-        check_signal(path, rate, *samples.shape)
+        check_signal(path, rate, frames, channels)
     elif rate is None:
         raise ParameterError("rate", f"needed in Hz: {path} is an NPZ with no 'rate' array")
     if "axes" in contents:
@@ -371,11 +380,11 @@ def _load_npz(path: Path, rate: float | None) -> Recording:
             raise fail(path, "'axes' must be an array of axis names")
         axes = tuple(str(a) for a in names)
     else:
-        axes = _axis_names(samples.shape[1])
-    if len(axes) != samples.shape[1]:
-        raise fail(path, f"NPZ names {len(axes)} axes for {samples.shape[1]} columns")
+        axes = _axis_names(channels)
+    if len(axes) != channels:
+        raise fail(path, f"NPZ names {len(axes)} axes for {channels} columns")
     units = str(contents["units"]) if "units" in contents else "arbitrary"
-    return Recording(samples, rate, axes, units=units)
+    return float(rate), axes, units
 
 
 def _check_zip_directory(path: Path, handle) -> None:
@@ -397,6 +406,36 @@ def _check_zip_directory(path: Path, handle) -> None:
                          f"{MAX_NPZ_DIRECTORY_BYTES:,} (a recording needs a few arrays)")
 
 
+def check_npz_method(path: Path, info: zipfile.ZipInfo, key: str) -> None:
+    """Refuse an NPZ member that is neither stored nor deflated (zipfile inflates bzip2 and
+    LZMA members without an output bound; numpy never writes them)."""
+    if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
+        raise fail(path, f"'{key}' is compressed with zip method {info.compress_type}; NPZ "
+                         f"arrays must be stored or deflated, as numpy writes them")
+
+
+def read_npy_header(handle, path: Path, key: str) -> tuple[tuple[int, ...], bool, np.dtype]:
+    """(shape, Fortran order, dtype) from the .npy header at the start of ``handle`` (an open
+    NPZ member), leaving ``handle`` at the data: versions 1.0 and 2.0, the header at most
+    :data:`~realpen.io.limits.MAX_NPY_HEADER_BYTES`."""
+    version = np.lib.format.read_magic(handle)
+    if version not in ((1, 0), (2, 0)):
+        raise fail(path, f"'{key}' is a .npy version {version[0]}.{version[1]} array; "
+                         f"RealPen reads versions 1.0 and 2.0")
+    # numpy reads the whole declared header (up to 4 GiB) before checking its size: the
+    # length is read and bounded here, and numpy parses a copy of the bounded bytes.
+    width = 2 if version == (1, 0) else 4
+    length_bytes = _read_exactly(handle, width, path, key)
+    length = int.from_bytes(length_bytes, "little")
+    if length > MAX_NPY_HEADER_BYTES:
+        raise fail(path, f"'{key}' declares a {length:,}-byte .npy header; headers are "
+                         f"limited to {MAX_NPY_HEADER_BYTES:,} bytes")
+    header = io.BytesIO(length_bytes + _read_exactly(handle, length, path, key))
+    read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
+        np.lib.format.read_array_header_2_0
+    return read_header(header)
+
+
 def _read_npz_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo, key: str,
                     samples: bool = False) -> np.ndarray:
     """One member of an NPZ, checked from its .npy header before any of its data is read.
@@ -406,28 +445,9 @@ def _read_npz_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo,
     in the stored type is made; any other member may declare at most
     ``MAX_NPZ_ARRAY_BYTES``. Object dtypes (pickles) and records are refused.
     """
-    if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
-        # zipfile inflates bzip2 and LZMA members without an output bound; numpy never
-        # writes them.
-        raise fail(path, f"'{key}' is compressed with zip method {info.compress_type}; NPZ "
-                         f"arrays must be stored or deflated, as numpy writes them")
+    check_npz_method(path, info, key)
     with archive.open(info) as handle:
-        version = np.lib.format.read_magic(handle)
-        if version not in ((1, 0), (2, 0)):
-            raise fail(path, f"'{key}' is a .npy version {version[0]}.{version[1]} array; "
-                             f"RealPen reads versions 1.0 and 2.0")
-        # numpy reads the whole declared header (up to 4 GiB) before checking its size: the
-        # length is read and bounded here, and numpy parses a copy of the bounded bytes.
-        width = 2 if version == (1, 0) else 4
-        length_bytes = _read_exactly(handle, width, path, key)
-        length = int.from_bytes(length_bytes, "little")
-        if length > MAX_NPY_HEADER_BYTES:
-            raise fail(path, f"'{key}' declares a {length:,}-byte .npy header; headers are "
-                             f"limited to {MAX_NPY_HEADER_BYTES:,} bytes")
-        header = io.BytesIO(length_bytes + _read_exactly(handle, length, path, key))
-        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
-            np.lib.format.read_array_header_2_0
-        shape, fortran, dtype = read_header(header)
+        shape, fortran, dtype = read_npy_header(handle, path, key)
         if dtype.itemsize == 0:
             raise fail(path, f"'{key}' holds {dtype} values, which take no bytes")
         if dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None:
