@@ -68,15 +68,14 @@ from realpen.io.recording import (
     _NPZ_METADATA,
     GAP_FACTOR,
     JITTER_TOLERANCE,
-    NPZ_SAMPLE_KEYS,
     TIME_PATTERN,
     _axis_names,
-    _check_zip_directory,
     _read_exactly,
     _read_npz_array,
     _wav_missing_bytes,
     check_npz_method,
     npz_metadata,
+    open_npz,
     read_npy_header,
 )
 
@@ -364,18 +363,7 @@ class _NpzStream(RecordingStream):
     def __init__(self, path: Path, rate: float | None):
         self.source, self.path = str(path), path
         try:
-            with open(path, "rb") as handle:
-                if handle.read(6) == b"\x93NUMPY":
-                    raise fail(path, "is a single .npy array, not an NPZ archive")
-                _check_zip_directory(path, handle)
-            with zipfile.ZipFile(path) as archive:
-                members: dict[str, zipfile.ZipInfo] = {}
-                for info in archive.infolist():
-                    name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
-                    members.setdefault(name, info)
-                key = next((k for k in NPZ_SAMPLE_KEYS if k in members), None)
-                if key is None:
-                    raise fail(path, "NPZ has no 'samples' array")
+            with open_npz(path) as (archive, members, key):
                 self.info, self.key = members[key], key
                 self._layout(archive)
                 contents = {name: _read_npz_array(path, archive, members[name], name)

@@ -17,6 +17,8 @@ import os
 import re
 import zipfile
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -338,18 +340,7 @@ def _load_npz(path: Path, rate: float | None) -> Recording:
     member is inflated only up to the size its header declares.
     """
     try:
-        with open(path, "rb") as handle:
-            if handle.read(6) == b"\x93NUMPY":
-                raise fail(path, "is a single .npy array, not an NPZ archive")
-            _check_zip_directory(path, handle)
-        with zipfile.ZipFile(path) as archive:
-            members: dict[str, zipfile.ZipInfo] = {}
-            for info in archive.infolist():  # np.savez names the member of array "x" x.npy
-                name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
-                members.setdefault(name, info)
-            key = next((k for k in NPZ_SAMPLE_KEYS if k in members), None)
-            if key is None:
-                raise fail(path, "NPZ has no 'samples' array")
+        with open_npz(path) as (archive, members, key):
             samples = _read_npz_array(path, archive, members[key], key, samples=True)
             contents = {name: _read_npz_array(path, archive, members[name], name)
                         for name in _NPZ_METADATA if name in members}
@@ -404,6 +395,26 @@ def _check_zip_directory(path: Path, handle) -> None:
     if size > MAX_NPZ_DIRECTORY_BYTES:
         raise fail(path, f"its zip directory is {size:,} bytes; NPZ files are limited to "
                          f"{MAX_NPZ_DIRECTORY_BYTES:,} (a recording needs a few arrays)")
+
+
+@contextmanager
+def open_npz(path: Path) -> Iterator[tuple[zipfile.ZipFile, dict[str, zipfile.ZipInfo], str]]:
+    """The open NPZ archive, its members by array name and the samples' key, once the file is
+    known to be an archive (not a bare .npy) with a bounded zip directory and a samples array.
+    Zip errors propagate (callers turn them into one line naming the file)."""
+    with open(path, "rb") as handle:
+        if handle.read(6) == b"\x93NUMPY":
+            raise fail(path, "is a single .npy array, not an NPZ archive")
+        _check_zip_directory(path, handle)
+    with zipfile.ZipFile(path) as archive:
+        members: dict[str, zipfile.ZipInfo] = {}
+        for info in archive.infolist():  # np.savez names the member of array "x" x.npy
+            name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+            members.setdefault(name, info)
+        key = next((k for k in NPZ_SAMPLE_KEYS if k in members), None)
+        if key is None:
+            raise fail(path, "NPZ has no 'samples' array")
+        yield archive, members, key
 
 
 def check_npz_method(path: Path, info: zipfile.ZipInfo, key: str) -> None:
