@@ -6,10 +6,13 @@ cd "$(dirname "$0")/.."
 python3 -m venv .venv
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e '.[test]'
-# The browser tests drive Debian's Chromium, and the store tests start a PostgreSQL server of
-# their own (initdb in a temporary folder): install what is missing when we may, with one
-# apt-get update for both.
+# The browser tests drive Debian's Chromium, the store tests start a PostgreSQL server of
+# their own (initdb in a temporary folder), and the Arduino Due firmware's C core is compiled
+# with cc: install what is missing when we may, with one apt-get update for all.
 missing=()
+if ! command -v cc >/dev/null 2>&1; then
+    missing+=(gcc libc6-dev)
+fi
 if [ ! -x /usr/bin/chromium ]; then
     missing+=(chromium)
 fi
@@ -22,7 +25,7 @@ if [ "${#missing[@]}" -gt 0 ]; then
     else
         echo "note: missing Debian package(s) ${missing[*]}, and installing them needs root and" \
              "apt-get; the tests that need them will be skipped (chromium: the browser tests;" \
-             "postgresql: the store tests on PostgreSQL)." >&2
+             "postgresql: the store tests on PostgreSQL; gcc: the Due firmware tests)." >&2
     fi
 fi
 # Lint first: the rules are in pyproject.toml ([tool.ruff]); any finding stops the run.
