@@ -159,3 +159,14 @@ print("passed", ok)
     assert result.returncode == 0, result.stderr + result.stdout
     expected = sum(len(VECTORS[key]) for key in ("crc16", "cobs", "frames", "streams"))
     assert result.stdout.split() == ["passed", str(expected)]
+
+
+def test_a_well_formed_frame_longer_than_max_frame_is_dropped():
+    body = bytes([p.PING, 1]) + bytes(range(1, 252)) + b"\x01"  # 255 bytes, CRC to follow
+    for extra in (0, 1, 2):
+        long_body = body + bytes([7]) * extra
+        crc = p.crc16(long_body)
+        frame = long_body + bytes([crc & 0xFF, crc >> 8])
+        decoder = p.FrameDecoder()
+        got = decoder.feed(p.cobs_encode(frame) + b"\x00")
+        assert (len(got), decoder.errors) == ((1, 0) if len(frame) <= p.MAX_FRAME else (0, 1))

@@ -136,3 +136,4 @@ from realpen.cli import export_cmds  # noqa: E402,F401
 from realpen.cli import hatt_cmds  # noqa: E402,F401
 from realpen.cli import study_cmds  # noqa: E402,F401
 from realpen.cli import stats_cmds  # noqa: E402,F401
+from realpen.cli import device_cmds  # noqa: E402,F401

@@ -81,6 +81,11 @@ DEFAULT_FLAGS: dict[str, str] = {
 }
 
 COMMAND_FLAGS: dict[str, dict[str, str]] = {
+    # The pen's commands: --count is how many PINGs (not --subpatterns); gain and ramp time
+    # are checked by realpen.device.client.state_payload.
+    "device ping": {"count": "--count"},
+    "device play": {"gain": "--gain", "fade_ms": "--fade-ms"},
+    "device stop": {"fade_ms": "--fade-ms"},
     # The report's power simulation is --power-sims.
     "stats report": {"sims": "--power-sims"},
     # The recording's rate (a CSV without time) is --input-rate; --rate is the pattern's.

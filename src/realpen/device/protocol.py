@@ -215,6 +215,7 @@ class FrameDecoder:
     """
 
     def __init__(self, max_frame=MAX_FRAME):
+        self.max_frame = max_frame
         self.max_encoded = max_frame + max_frame // 254 + 2
         self.buffer = bytearray()
         self.overflow = False
@@ -229,7 +230,7 @@ class FrameDecoder:
                 if self.overflow:
                     self.errors += 1
                 elif buffer:
-                    frame = self._decode(buffer)
+                    frame = self._decode(buffer, self.max_frame)
                     if frame is None:
                         self.errors += 1
                     else:
@@ -245,12 +246,12 @@ class FrameDecoder:
         return frames
 
     @staticmethod
-    def _decode(encoded):
+    def _decode(encoded, max_frame):
         try:
             body = cobs_decode(encoded)
         except ValueError:
             return None
-        if len(body) < 4:
+        if len(body) < 4 or len(body) > max_frame:
             return None
         crc = body[-2] | (body[-1] << 8)
         if crc16(memoryview(body)[:-2]) != crc:

@@ -1,0 +1,1 @@
+../../src/realpen/device/protocol.py

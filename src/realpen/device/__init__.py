@@ -1,0 +1,33 @@
+"""The pen itself: its protocol, the host's links to it, and a simulated pen.
+
+- :mod:`~realpen.device.protocol` — the frames and messages, byte by byte (``docs/protocol.md``);
+  pure Python that also runs on the pen under MicroPython (it imports nothing of RealPen).
+- :mod:`~realpen.device.transport` — byte pipes to a pen: a serial port (USB CDC, a
+  pseudo-terminal) through pyserial, or Bluetooth LE through bleak (``ble:NAME``).
+- :mod:`~realpen.device.client` — :class:`~realpen.device.client.PenClient`: HELLO, pattern
+  upload, SET_STATE, PING and the pen's events over a transport, with one-line errors
+  (:class:`~realpen.device.transport.DeviceError`).
+- :mod:`~realpen.device.pattern` — a profile's tactile pattern as the int16 samples a pen plays.
+- :mod:`~realpen.device.sim` — :class:`~realpen.device.sim.SimPen`: the real firmware under the
+  MicroPython Unix port on a pseudo-terminal.
+
+May import: numpy and :mod:`realpen.errors`, :mod:`realpen.exports` (resampling a loop) and
+:mod:`realpen.profile`; pyserial and bleak only inside the functions that open a link. This
+``__init__`` imports nothing, so the protocol module loads alone.
+"""
+
+from __future__ import annotations
+
+from realpen._lazy import lazy_attributes
+
+__all__ = ["DeviceError", "DeviceDisconnected", "Transport", "SerialTransport", "BleTransport",
+           "open_transport", "PenClient", "PenInfo", "PenEvent", "pen_pattern", "check_fits"]
+
+_HOMES = {
+    "DeviceError": "transport", "DeviceDisconnected": "transport", "Transport": "transport",
+    "SerialTransport": "transport", "BleTransport": "transport", "open_transport": "transport",
+    "PenClient": "client", "PenInfo": "client", "PenEvent": "client",
+    "pen_pattern": "pattern", "check_fits": "pattern",
+}
+
+__getattr__, __dir__ = lazy_attributes(__name__, _HOMES, __all__)

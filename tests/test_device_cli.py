@@ -1,0 +1,181 @@
+"""``realpen device …`` against the real firmware (a SimPen on a pseudo-terminal).
+
+In-process through :func:`conftest.run_cli`: list, info, upload, play, stop, ping, monitor, the
+port from ``--port`` before or after the subcommand or from ``REALPEN_PORT``, and each failure
+as one line with exit code 2. One subprocess: ``realpen device sim`` prints its port, serves a
+client, and writes its WAV when interrupted.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import soundfile as sf
+from conftest import assert_clean_failure, run_cli
+
+from realpen.device import protocol as p
+from realpen.device.client import PenClient
+from realpen.device.sim import SimPen
+from realpen.device.transport import BlePenInfo, BluetoothUnavailable, SerialPortInfo, open_transport
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    trace = tmp_path_factory.mktemp("sim") / "trace.jsonl"
+    with SimPen(trace=trace) as pen:
+        pen.trace_path = trace
+        yield pen
+
+
+def states(trace) -> list[tuple[int, int, int]]:
+    """(playing, gain, rate) of each SET_STATE the pen took, from its trace."""
+    events = [json.loads(line) for line in trace.read_text().splitlines() if line.strip()]
+    return [(e["playing"], e["gain"], e["rate"]) for e in events if e["event"] == "set_state"]
+
+
+def test_info_with_the_port_before_or_after_the_subcommand(sim, monkeypatch):
+    first = run_cli("device", "--port", sim.port, "info")
+    assert first.returncode == 0, first.stderr
+    assert f"port: {sim.port}" in first.stdout
+    assert "sample rate: 8000 Hz" in first.stdout and "protocol: 1" in first.stdout
+    assert "largest pattern: 32768 bytes (2.048 s at 8000 Hz)" in first.stdout
+    assert re.search(r"firmware: \d+\.\d+\.\d+", first.stdout)
+    second = run_cli("device", "info", "-p", sim.port)
+    assert second.returncode == 0 and second.stdout.splitlines()[:-1] == \
+        first.stdout.splitlines()[:-1]  # all but the round trip
+    monkeypatch.setenv("REALPEN_PORT", sim.port)
+    assert run_cli("device", "info").returncode == 0
+
+
+def test_upload_play_stop(sim):
+    done = run_cli("device", "upload", "pencil", "--port", sim.port)
+    assert done.returncode == 0, done.stderr
+    assert re.search(r"uploaded pencil to .* 24000 bytes \(1\.5 s at 8000 Hz\) in \d+\.\d\d s "
+                     r"\([\d.]+ kB/s\), pattern id \d+", done.stdout), done.stdout
+    before = len(states(sim.trace_path))
+    played = run_cli("device", "play", "--gain", "0.5", "--rate", "2", "--port", sim.port)
+    assert played.returncode == 0, played.stderr
+    assert "gain 0.5, rate 2" in played.stdout
+    stopped = run_cli("device", "stop", "--port", sim.port)
+    assert stopped.returncode == 0, stopped.stderr
+    time.sleep(0.1)  # the trace is written when the player applies the state
+    assert states(sim.trace_path)[before:] == [(1, round(0.5 * p.GAIN_ONE), 2 * p.RATE_ONE),
+                                               (0, 0, p.RATE_ONE)]
+
+
+def test_ping_and_monitor(sim):
+    pinged = run_cli("device", "ping", "--count", "3", "--port", sim.port)
+    assert pinged.returncode == 0, pinged.stderr
+    lines = pinged.stdout.splitlines()
+    assert len(lines) == 4 and all("ms round trip, pen clock" in line for line in lines[:3])
+    assert lines[3].startswith(f"3 PINGs over {sim.port}: round trip min ")
+    with PenClient(open_transport(sim.port)) as client:  # something to see: a pattern swap
+        client.upload(np.arange(400, dtype=np.int16), 8000, pattern_id=77)
+    watched = run_cli("device", "monitor", "--seconds", "1.2", "--port", sim.port)
+    assert watched.returncode == 0, watched.stderr
+    assert watched.stdout.startswith("monitoring ")
+    assert len(re.findall(r" s  ping \d+\.\d\d ms", watched.stdout)) == 2
+    assert re.search(r"stopped after 1\.\d s: \d+ events?, 2 pings, round trip median", watched.stdout)
+
+
+def test_list_says_plainly_when_bluetooth_is_unavailable(monkeypatch):
+    from realpen.device import transport
+
+    monkeypatch.setattr(transport, "list_serial_ports", lambda: [
+        SerialPortInfo("/dev/ttyACM0", "Board in FS mode", "USB VID:PID=2E8A:0005"),
+        SerialPortInfo("/dev/ttyS0", "n/a", "n/a")])
+
+    def no_bluetooth(seconds, **kwargs):
+        raise BluetoothUnavailable("Bluetooth: no Bluetooth adapter (No Bluetooth adapters found.)")
+
+    monkeypatch.setattr(transport, "scan_ble", no_bluetooth)
+    done = run_cli("device", "list")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [
+        "serial ports:", "  /dev/ttyACM0  Board in FS mode", "  /dev/ttyS0",
+        "Bluetooth LE: unavailable (no Bluetooth adapter (No Bluetooth adapters found.))"]
+    monkeypatch.setattr(transport, "scan_ble", lambda seconds, **kwargs: [
+        BlePenInfo("RealPen-7", "AA:BB:CC:DD:EE:FF", -61)])
+    monkeypatch.setattr(transport, "list_serial_ports", lambda: [])
+    done = run_cli("device", "list", "--seconds", "0.5")
+    assert done.stdout.splitlines() == [
+        "serial ports:", "  none", "Bluetooth LE pens (0.5 s scan):",
+        "  ble:RealPen-7  AA:BB:CC:DD:EE:FF  -61 dBm"]
+    assert run_cli("device", "list", "--no-ble").stdout.splitlines() == ["serial ports:", "  none"]
+
+
+def test_defaults_written_out_for_fast_help_agree_with_the_library():
+    from realpen.cli import device_cmds
+    from realpen.device import client
+
+    assert device_cmds.DEFAULT_TIMEOUT_S == client.DEFAULT_TIMEOUT_S
+
+
+def test_list_on_this_machine_never_fails():
+    done = run_cli("device", "list", "--seconds", "0.2")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("serial ports:\n") and "Bluetooth LE" in done.stdout
+
+
+def test_failures_are_one_line(tmp_path, monkeypatch):
+    monkeypatch.delenv("REALPEN_PORT", raising=False)
+    assert_clean_failure(run_cli("device", "info"), "--port")
+    assert_clean_failure(run_cli("device", "ping", "--port", str(tmp_path / "none")),
+                         f"{tmp_path / 'none'}: cannot open this serial port (no such device)")
+    master, slave = os.openpty()  # nobody answers there
+    try:
+        path = os.ttyname(slave)
+        started = time.monotonic()
+        assert_clean_failure(run_cli("device", "--timeout", "0.3", "stop", "--port", path),
+                             f"{path}: no reply to HELLO within 0.3 s")
+        assert time.monotonic() - started < 2
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_a_pen_that_cannot_take_the_request():
+    with SimPen(protocol_version=2) as other:
+        result = run_cli("device", "info", "--port", other.port)
+        assert_clean_failure(result, f"{other.port}: the pen")
+        assert "this host speaks 1" in result.stderr
+    with SimPen(max_pattern_bytes=16000) as small:
+        result = run_cli("device", "upload", "pencil", "--port", small.port)
+        assert_clean_failure(result, f"{small.port}: the pattern (24000 bytes")
+        assert "at most 16000 bytes" in result.stderr
+
+
+def test_sim_prints_its_port_and_writes_the_wav_when_interrupted(tmp_path):
+    record, trace = tmp_path / "pen.wav", tmp_path / "trace.jsonl"
+    process = subprocess.Popen([sys.executable, "-m", "realpen", "device", "sim", "--record",
+                                str(record), "--trace", str(trace)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = process.stdout.readline()
+        assert re.fullmatch(r"port: /dev/pts/\d+\n", line), (line, process.stderr.read()
+                                                            if process.poll() is not None else "")
+        with PenClient(open_transport(line.split(": ", 1)[1].strip())) as client:
+            assert client.hello().sample_rate == 8000
+            client.upload(np.full(800, 8000, np.int16), 8000)
+            client.set_state(True, 1.0)
+            client.sync()
+            time.sleep(0.4)
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=10)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 0, err
+    assert "Traceback" not in err and f"wrote {record}" in out
+    samples, rate = sf.read(record, dtype="int16")
+    assert rate == 8000 and (samples == (8000 * 32767) >> 15).sum() > 0.1 * 8000
+    assert any(json.loads(line)["event"] == "set_state" for line in trace.read_text().splitlines())
