@@ -1,4 +1,4 @@
-"""Latency of the live app on loopback: pen event → server, and → the (simulated) pen device.
+"""Latency of the live app on loopback: pen event → server, and → the device seam (its log).
 
 Starts ``realpen serve`` in a subprocess (a fresh store in a temporary folder), opens a WebSocket
 like a page, puts the pen down, and sends 1000 pen events one at a time as the page does: a
@@ -6,7 +6,7 @@ like a page, puts the pen down, and sends 1000 pen events one at a time as the p
 its ack. For every event it measures
 
 - event → server: the server's receive time of the gain (``ack.server_ns``) minus its send time;
-- event → device: the simulated device's arrival time (``/api/device/log``) minus the send time;
+- event → device: the device command log's arrival time (``/api/device/log``) minus the send time;
 - round trips: until the gain's ack, and the samples' ack (after the SQLite commit), are back.
 
 Both processes read ``time.monotonic_ns()`` (CLOCK_MONOTONIC, shared by all processes on Linux),
@@ -389,7 +389,7 @@ def main() -> None:
             figures = measure(url, args.events)
             print(f"{args.events} events on loopback (one at a time, after a 50-event warm-up):")
             print(f"  event -> server            {percentiles(figures['to_server'])}")
-            print(f"  event -> simulated device  {percentiles(figures['to_device'])}")
+            print(f"  event -> device (log)      {percentiles(figures['to_device'])}")
             print(f"  gain round trip (ack)      {percentiles(figures['gain_rtt'])}")
             print(f"  samples round trip, stored {percentiles(figures['samples_rtt'])}"
                   f"   (4 samples, SQLite commit)")

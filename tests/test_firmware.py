@@ -768,3 +768,19 @@ def test_sim_pen_errors_are_one_clear_line(tmp_path):
     with pytest.raises(RealPenError, match=r"exited at start \(code 1\): ImportError: no module"):
         pen.start()
     assert not pen.alive and pen.pty is None
+
+
+def test_a_pattern_committed_while_idle_plays_from_the_first_stroke_after_it():
+    """A COMMIT and a SET_STATE(playing) decoded before the same block: the new pattern starts
+    the stroke (it must not wait a whole loop of the old one)."""
+    player = Player(sample_rate=RATE, max_pattern_bytes=4096)
+    for samples, pid in (([1000] * 200, 1), ([-2000] * 300, 2)):
+        staging = player.staging()
+        staging[:len(samples)] = type(staging)("h", samples)
+        player.commit(len(samples), pid)
+        if pid == 1:
+            render(player, 32)
+    player.set_state(1, P.GAIN_ONE, P.RATE_ONE, 5)
+    out = np.array(render(player, 64))
+    assert player.pattern_id == 2
+    assert np.count_nonzero(out) > 50 and np.all(out[out != 0] < 0)  # the new one, from the start

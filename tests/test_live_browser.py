@@ -2,8 +2,8 @@
 
 A real ``realpen serve`` runs in a subprocess; pen strokes are trusted pen events with pressure,
 tilt and timestamps, injected through the DevTools protocol (``Input.dispatchMouseEvent`` with
-``pointerType: "pen"``). The tests read the page's state (``window.realpen``), the simulated
-device's log and the SQLite store, and compare the page's gains with the Python implementation
+``pointerType: "pen"``). The tests read the page's state (``window.realpen``), the device's
+command log and the SQLite store, and compare the page's gains with the Python implementation
 of Eq. 1. Screenshots go to ``test-artifacts/`` (git-ignored).
 
 Chromium runs with ``--autoplay-policy=no-user-gesture-required``, so every page's AudioContext

@@ -128,7 +128,7 @@ def test_the_page_mixes_the_point_loops_at_the_pens_speed_and_force(grid_server)
                 assert held["tactileTarget"] > 0
                 assert held["tactile"] == pytest.approx(held["tactileTarget"], abs=1e-3)
                 writing.lift()
-            # The simulated device hears the strokes as with any pen (it ignores the grid).
+            # The device log hears the strokes as with any pen (a pen plays the reference pattern).
             session = page.evaluate("realpen.link.session")
             log = httpx.get(grid_server.base + "api/device/log").json()["entries"]
             downs = [e for e in log if e["session"] == session and e["kind"] == "pen_down"]

@@ -30,7 +30,7 @@ from websockets.sync.client import connect  # noqa: E402
 from realpen.errors import RealPenError  # noqa: E402
 from realpen.live.app import DEVICE_LOG_PAGE, LiveSettings, create_app  # noqa: E402
 from realpen.live.auth import CONTENT_SECURITY_POLICY, content_security_policy  # noqa: E402
-from realpen.live.device import Origin, SimulatedDevice  # noqa: E402
+from realpen.live.device import CommandLog, Origin  # noqa: E402
 from realpen.live.server import bind, server_config  # noqa: E402
 from realpen.live.store import StrokeStore  # noqa: E402
 from realpen.profile import resolve_profile  # noqa: E402
@@ -356,7 +356,7 @@ def test_other_sites_are_refused(client, headers, path, allowed):
 
 def test_the_device_log_comes_in_pages(tmp_path, monkeypatch):
     monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
-    device = SimulatedDevice()
+    device = CommandLog()
     for k in range(2 * DEVICE_LOG_PAGE + 500):
         device.gain(Origin("s", 1, k), 0.5)
     app = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3", device=device))

@@ -152,6 +152,10 @@ class Player:
         """Render ``len(buf)`` samples into ``buf`` (a preallocated ``array('h')``)."""
         self.swap_at = -1
         self.applied = False
+        if self._next is not None and (self.length == 0 or (self.amp == 0 and not self.playing)):
+            # Committed while idle: it swaps in at once, before a SET_STATE that arrived in the
+            # same block can start the old pattern playing.
+            self._swap(0)
         request = self._request
         if request is not None:
             self._request = None

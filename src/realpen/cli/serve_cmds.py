@@ -10,10 +10,17 @@ import typer
 
 from realpen.cli import app, sub_app
 from realpen.cli.common import check_outputs, console, force_option
-from realpen.errors import RealPenError, require_choice
+from realpen.errors import ParameterError, RealPenError, require_choice
 from realpen.io.paths import default_store
 
 TACTILE_CHOICES = ("audio", "none")
+DEVICE_WAIT_S = 3.0  # how long the summary waits for the pen's first connection attempt
+DEVICE_HELP = ("The pen's own device: sim (the simulated pen: the real firmware under the "
+               "MicroPython Unix port on a pseudo-terminal), serial:PORT (a pen on USB, e.g. "
+               "serial:/dev/ttyACM0) or ble:NAME (a pen over Bluetooth, by name or address). "
+               "Pen down/up and gain become the pen protocol's SET_STATE and a change of pen "
+               "uploads its pattern; a pen that goes away is reconnected. Default: no pen, the "
+               "commands are only logged (/api/device/log).")
 LAN_TOKEN_FILE = "lan-token"  # in the data folder: the LAN token a restarted server keeps
 STORE_HELP = ("The store: an SQLite file (default: strokes.sqlite3 in the data folder) or a "
               "PostgreSQL URL, postgresql://USER:PASSWORD@HOST/DATABASE.")
@@ -56,14 +63,22 @@ def serve(
     designs: list[Path] = typer.Option(
         [], "--design", help="A study design file (YAML or JSON) to offer beside study1 and "
                              "study2 (repeatable)."),
+    device: str | None = typer.Option(None, "--device", metavar="sim|serial:PORT|ble:NAME",
+                                      help=DEVICE_HELP),
 ) -> None:
     """Start the live app: open the printed URL, pick a pen, and write (studies: /study)."""
     from realpen.io.paths import data_dir
     from realpen.live.app import LiveSettings, create_app
     from realpen.live.auth import LOOPBACK_HOSTS, kept_token
+    from realpen.live.device import open_device, parse_device
     from realpen.live.server import bind, lan_address, run, url_host
 
     require_choice("tactile", tactile, TACTILE_CHOICES)
+    if device is not None:
+        try:
+            parse_device(device)
+        except ParameterError as error:
+            raise RealPenError(f"--device: {error.problem}") from None
     if renew_token and not lan:
         raise RealPenError("--new-token: only with --lan (without it no token is used)")
     host = host or ("0.0.0.0" if lan else "127.0.0.1")
@@ -72,14 +87,19 @@ def serve(
                            f"request then needs a random token)")
     store = default_store() if store is None else store
     token = kept_token(data_dir() / LAN_TOKEN_FILE, renew=renew_token) if lan else None
-    settings = LiveSettings(store=store, profiles=list(profiles), tactile=tactile, token=token,
-                            allowed_hosts=None if lan else LOOPBACK_HOSTS, designs=list(designs))
-    # The port first: a port in use is refused before the profiles load and the store opens.
+    # The port first: a port in use is refused before the pen, the profiles and the store.
     sock = bind(host, port)
+    pen = None
     try:
+        pen = open_device(device)
+        settings = LiveSettings(store=store, profiles=list(profiles), tactile=tactile,
+                                token=token, allowed_hosts=None if lan else LOOPBACK_HOSTS,
+                                designs=list(designs), device=pen)
         live_app = create_app(settings)
     except BaseException:
         sock.close()
+        if pen is not None:
+            pen.close()
         raise
     state = live_app.state.live
     # uvicorn stops gracefully on SIGINT/SIGTERM, then re-raises the signal: end quietly.
@@ -99,6 +119,7 @@ def serve(
                        f" | store: {state.store.display}")
         # Profiles that did not load are said here, once, on stdout (not logged to stderr).
         summary += [f"  skipped profile: {problem}" for problem in state.catalog.skipped]
+        summary.append(f"  pen device: {_device_line(pen)}")
         summary.append("  Ctrl-C stops the server.")
         print("\n".join(summary), flush=True)  # one write: a quick Ctrl-C cannot split it
         run(live_app, sock)
@@ -109,6 +130,7 @@ def serve(
         sock.close()
         if not state.stopped:  # the app never shut down (it never started serving)
             state.store.discard()
+            pen.close()
     if state.count_problem is not None:
         print(f"stopped: the store is closed but could not be counted ({state.count_problem}) "
               f"({state.store.display})", flush=True)
@@ -116,6 +138,19 @@ def serve(
     strokes, samples = state.final_counts or (0, 0)
     print(f"stopped: the store holds {strokes} strokes, {samples} samples "
           f"({state.store.display})", flush=True)
+
+
+def _device_line(pen) -> str:
+    """The summary's pen-device line: the device and its state after its first attempt."""
+    from realpen.live.device import device_status
+
+    wait = getattr(pen, "wait_attempted", None)
+    if wait is not None:
+        wait(DEVICE_WAIT_S)
+    status = device_status(pen)
+    if status["kind"] == "log":
+        return "none (the commands are only logged: /api/device/log)"
+    return f"{status['name']}: {status['message']}"
 
 
 @strokes_app.command("export")

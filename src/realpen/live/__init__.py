@@ -10,7 +10,7 @@ events. The pieces:
   :mod:`realpen.study.tables`) and its CSV export;
 - :mod:`~realpen.live.study_routes` — the study pages and HTTP API (:mod:`realpen.study`);
 - :mod:`~realpen.live.bodies` — request bodies: small, and sent in time;
-- :mod:`~realpen.live.device` — the seam for the pen's own hardware and the simulated device;
+- :mod:`~realpen.live.device` — the seam for the pen's own hardware: the command log, :func:`open_device`;
 - :mod:`~realpen.live.catalog` — the profiles the server offers;
 - :mod:`~realpen.live.auth` — the LAN token, Host and Origin checks.
 

@@ -10,8 +10,11 @@ and :class:`~realpen.live.auth.SecurityHeaders`, which adds the security headers
 ``GET /api/profiles/{name}/sound.wav``       a pen's sound unit (32-bit float WAV)
 ``GET /api/profiles/{name}/tactile.wav``     a pen's tactile pattern (32-bit float WAV)
 ``GET /api/profiles/{name}/grid/{i}.wav``    the loop of point i of a pen's vibration grid
-``GET /api/device/log?since=N&limit=M``      the simulated device's command log, a page of at
-                                             most :data:`DEVICE_LOG_PAGE` entries at a time
+``GET /api/device``                          the pen device: name, kind, connected, message, info
+``GET /api/device/log?since=N&limit=M``      the device's command log, a page of at most
+                                             :data:`DEVICE_LOG_PAGE` entries at a time
+``GET /api/pens/{name}/pen-pattern?rate=R``  a pen's tactile pattern as the pen plays it: int16
+                                             little-endian at R Hz (for the page's own links)
 ``GET /api/status``                          pages connected, strokes and samples stored
 ``/study``, ``/api/studies``, ``/api/sessions…``  the studies (:mod:`realpen.live.study_routes`)
 ``WS  /ws``                                  pen events (:mod:`realpen.live.messages`)
@@ -20,6 +23,7 @@ and :class:`~realpen.live.auth.SecurityHeaders`, which adds the security headers
 from __future__ import annotations
 
 import contextlib
+import threading
 from dataclasses import dataclass, field
 from importlib.resources import files
 from pathlib import Path
@@ -32,11 +36,12 @@ from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 
 from realpen import __version__
+from realpen.errors import RealPenError
 from realpen.io.paths import default_store
 from realpen.live.auth import LOOPBACK_HOSTS, AccessGuard, SecurityHeaders
 from realpen.live.bodies import BodyLimit
 from realpen.live.catalog import Catalog
-from realpen.live.device import PenDevice, SimulatedDevice
+from realpen.live.device import CommandLog, PenDevice, device_status
 from realpen.live.messages import MAX_MESSAGE_BYTES, MAX_SAMPLES, MODALITIES, PROTOCOL
 from realpen.live.session import Session
 from realpen.live.store import SHUTDOWN_WAIT_S, STORE_ERRORS, StrokeStore, error_line
@@ -45,6 +50,8 @@ from realpen.live.study_routes import add_study_routes, load_designs, validation
 STATIC_DIR = Path(str(files(__package__) / "static"))
 NO_CACHE = {"Cache-Control": "no-cache"}
 DEVICE_LOG_PAGE = 1000  # entries per device-log response: one response never stalls the pens
+PEN_RATE_MIN, PEN_RATE_MAX = 1000, 96000  # pen-pattern rates served, Hz
+PEN_PATTERNS_KEPT = 16  # rendered pen patterns kept (by pen, version and rate)
 
 
 @dataclass
@@ -60,7 +67,8 @@ class LiveSettings:
         token: when set, every request must carry it (LAN mode sets a random one).
         allowed_hosts: host names the ``Host`` header may name (None: any). Loopback-only
             serving passes :data:`~realpen.live.auth.LOOPBACK_HOSTS`.
-        device: what pen commands drive (None: a new :class:`SimulatedDevice`).
+        device: what pen commands drive (None: a new :class:`CommandLog`, no pen; see
+            :func:`realpen.live.device.open_device`).
         max_message_bytes: the size limit of one WebSocket message.
         designs: study design files offered beside the built-in ``study1`` and ``study2``.
     """
@@ -145,7 +153,7 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
     catalog = Catalog(settings.profiles)
     designs = load_designs(settings.designs)
     store = StrokeStore(settings.store or default_store())
-    state = LiveState(settings, catalog, store, settings.device or SimulatedDevice())
+    state = LiveState(settings, catalog, store, settings.device or CommandLog())
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -205,6 +213,38 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
             raise HTTPException(404, f"the profile '{name}' has no grid point {index}") from None
         return Response(data, media_type="audio/wav",
                         headers={**NO_CACHE, "ETag": f'"{entry.profile.version}-grid-{index}"'})
+
+    @app.get("/api/device")
+    def device() -> dict:
+        return device_status(state.device)
+
+    pen_patterns: dict[tuple[str, str, int], bytes] = {}  # rendered once per pen and rate
+    pen_patterns_lock = threading.Lock()  # the route runs on the thread pool
+
+    @app.get("/api/pens/{name}/pen-pattern")
+    def pen_pattern(name: str,
+                    rate: int = Query(..., ge=PEN_RATE_MIN, le=PEN_RATE_MAX)) -> Response:
+        from realpen.device.pattern import pattern_bytes
+        from realpen.device.pattern import pen_pattern as render
+
+        entry = catalog.get(name)
+        if entry is None:
+            raise HTTPException(404, f"no profile '{name}'")
+        key = (name, entry.profile.version, rate)
+        with pen_patterns_lock:
+            data = pen_patterns.get(key)
+        if data is None:
+            try:
+                data = pattern_bytes(render(entry.profile, rate))
+            except RealPenError as error:  # a rate the pattern cannot take
+                raise HTTPException(422, str(error)) from None
+            with pen_patterns_lock:
+                if len(pen_patterns) >= PEN_PATTERNS_KEPT:
+                    pen_patterns.pop(next(iter(pen_patterns)))
+                pen_patterns[key] = data
+        return Response(data, media_type="application/octet-stream", headers={
+            **NO_CACHE, "ETag": f'"{entry.profile.version}-pen-{rate}"',
+            "X-Sample-Rate": str(rate)})
 
     @app.get("/api/device/log")
     def device_log(since: int = Query(0, ge=0, le=2**53),

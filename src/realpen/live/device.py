@@ -1,4 +1,4 @@
-"""The seam for the pen's own hardware, and the built-in simulated device.
+"""The seam for the pen's own hardware: what the server tells the pen, and what drives it.
 
 The server tells the pen's actuator three things, in the order the page sent them:
 
@@ -6,7 +6,7 @@ The server tells the pen's actuator three things, in the order the page sent the
               whether the modality includes touch. A profile with a vibration grid
               (``profile.grid``) is passed whole, but the commands carry no speed or force, so
               a device cannot follow the grid from them: it plays the reference pattern
-              (``tactile.wav``). :class:`SimulatedDevice` logs the pen and ignores the grid;
+              (``tactile.wav``);
 ``gain``      a new target gain (Eq. 1 before smoothing; the device smooths with the profile's
               ``coupling.smoothing_ms`` and scales ``a_max`` to its full drive). Sent only
               while a stroke whose modality includes touch is down;
@@ -14,8 +14,15 @@ The server tells the pen's actuator three things, in the order the page sent the
 
 A :class:`PenDevice` is called on the server's event loop, so each call must return at once
 (well under a millisecond): a hardware driver hands the command to its own thread or queue.
-:class:`SimulatedDevice` is the built-in one: it keeps an ordered, thread-safe log of the
-commands with their arrival times, which tests and ``GET /api/device/log`` read.
+
+Two devices exist:
+
+- :class:`CommandLog` (no pen): it only keeps an ordered, thread-safe log of the commands with
+  their arrival times, which tests and ``GET /api/device/log`` read. Nothing is played.
+- :class:`realpen.device.bridge.PenBridge` (a real pen over USB serial or Bluetooth, or the
+  simulated pen, the real firmware under the MicroPython Unix port): the commands become the pen
+  protocol's ``SET_STATE`` frames and pattern uploads on a worker thread; it keeps a
+  :class:`CommandLog` too. :func:`open_device` builds one from a device string.
 """
 
 from __future__ import annotations
@@ -27,11 +34,15 @@ from collections import deque
 from dataclasses import asdict, dataclass, field
 from typing import Literal, Protocol
 
+from realpen.errors import ParameterError
 from realpen.profile.bundle import PenProfile
 
-__all__ = ["LOG_LIMIT", "Origin", "PenDevice", "DeviceCommand", "SimulatedDevice"]
+__all__ = ["LOG_LIMIT", "DEVICE_KINDS", "Origin", "PenDevice", "DeviceCommand", "CommandLog",
+           "parse_device", "open_device", "device_status"]
 
 LOG_LIMIT = 100_000  # entries kept; older ones are dropped (their indices stay counted)
+DEVICE_KINDS = ("sim", "serial", "ble")
+DEVICE_FORMS = "sim, serial:PORT or ble:NAME"
 
 
 @dataclass(frozen=True)
@@ -44,7 +55,11 @@ class Origin:
 
 
 class PenDevice(Protocol):
-    """What the server drives. Implementations must not block (see the module doc)."""
+    """What the server drives. Implementations must not block (see the module doc).
+
+    A device may also have ``status() -> dict`` (``GET /api/device``) and the log's
+    ``entries(since, limit)`` and ``count`` (``GET /api/device/log``).
+    """
 
     name: str
 
@@ -63,7 +78,7 @@ class PenDevice(Protocol):
 
 @dataclass(frozen=True)
 class DeviceCommand:
-    """One command as the simulated device received it.
+    """One command as the device received it.
 
     Attributes:
         index: position in the device's log (0, 1, 2, … over the device's life).
@@ -88,10 +103,15 @@ class DeviceCommand:
         return asdict(self)
 
 
-class SimulatedDevice:
-    """A device that only logs: an ordered, thread-safe record of every command."""
+class CommandLog:
+    """The device when there is no pen: an ordered, thread-safe record of every command.
 
-    name = "simulated"
+    Nothing is played. A :class:`~realpen.device.bridge.PenBridge` keeps one as well, so the
+    log reads the same whatever drives the pen.
+    """
+
+    name = "log"
+    kind = "log"
 
     def __init__(self, limit: int = LOG_LIMIT):
         self._lock = threading.Lock()
@@ -123,8 +143,14 @@ class SimulatedDevice:
         self._record("pen_up", origin)
 
     def close(self) -> None:
-        """Mark the device closed."""
+        """Mark the log closed."""
         self.closed = True
+
+    def status(self) -> dict:
+        """``GET /api/device``: no pen is driven; the commands are only logged."""
+        return {"name": self.name, "kind": self.kind, "connected": False,
+                "message": "no pen device: the commands are only logged (GET /api/device/log)",
+                "info": None}
 
     @property
     def count(self) -> int:
@@ -139,3 +165,72 @@ class SimulatedDevice:
             start = max(since - first, 0)
             stop = len(self._log) if limit is None else min(len(self._log), start + limit)
             return list(itertools.islice(self._log, start, stop))  # deque[i] is O(n) each
+
+
+def parse_device(spec: str) -> tuple[str, str]:
+    """Split a device string into (kind, target).
+
+    ``"sim"`` → ``("sim", "")``; ``"serial:/dev/ttyACM0"`` → ``("serial", "/dev/ttyACM0")``;
+    ``"ble:RealPen"`` → ``("ble", "RealPen")`` (a name or an address).
+
+    Raises:
+        ParameterError: (``device``) any other form, or an empty port or name.
+    """
+    kind, colon, target = str(spec).partition(":")
+    if kind == "sim" and not colon:
+        return "sim", ""
+    if kind in ("serial", "ble") and colon and target.strip():
+        return kind, target.strip()
+    if kind in ("serial", "ble"):
+        what = "port" if kind == "serial" else "name or address"
+        raise ParameterError("device", f"{spec!r} names no {what} (expected {DEVICE_FORMS})")
+    raise ParameterError("device", f"unknown device {spec!r} (expected {DEVICE_FORMS})")
+
+
+def open_device(spec: str | None, *, trace=None, record=None) -> PenDevice:
+    """The device a server drives, from a device string (see :func:`parse_device`).
+
+    ``None`` gives a :class:`CommandLog`. ``"sim"`` starts the simulated pen
+    (:class:`realpen.device.sim.SimPen`, the firmware under the MicroPython Unix port on a
+    pseudo-terminal), ``"serial:PORT"`` and ``"ble:NAME"`` connect to a real pen; each gives a
+    :class:`~realpen.device.bridge.PenBridge`, which connects on its own thread and keeps
+    trying: a pen that is not there yet is not an error (this returns at once, after starting
+    the simulated pen's firmware for ``"sim"``).
+
+    Args:
+        spec: the device string, or None.
+        trace, record: for ``"sim"`` only: the firmware's JSON-lines trace and the WAV of
+            what it played (written when the device closes).
+
+    Raises:
+        ParameterError: (``device``) a malformed string.
+        RealPenError: the simulated pen cannot start (the MicroPython Unix port is missing).
+    """
+    if spec is None:
+        return CommandLog()
+    kind, target = parse_device(spec)
+    from realpen.device.bridge import PenBridge, port_connector
+
+    if kind != "sim":
+        return PenBridge(port_connector(spec if kind == "ble" else target), name=spec,
+                         kind=kind, log=CommandLog())
+    from realpen.device.sim import SimPen
+
+    sim = SimPen(trace=trace, record=record).start()
+    try:
+        bridge = PenBridge(port_connector(lambda: sim.port), name="sim", kind="sim",
+                           log=CommandLog(), on_close=[sim.stop])
+    except BaseException:
+        sim.stop()
+        raise
+    bridge.sim = sim  # so a test (or a caller) can reboot the simulated pen
+    return bridge
+
+
+def device_status(device: PenDevice) -> dict:
+    """``GET /api/device`` for any device: its own ``status()``, or what can be said without."""
+    status = getattr(device, "status", None)
+    if status is not None:
+        return status()
+    return {"name": device.name, "kind": "custom", "connected": None,
+            "message": f"the {device.name} device reports no status", "info": None}

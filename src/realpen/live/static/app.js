@@ -12,6 +12,12 @@
 // vibration grid, pointTargets and pointGains are the target and applied gains of each point's
 // tactile loop (model.VibrationGrid computes them).
 //
+// The Pen panel (footer button "Pen") drives the pen's actuator straight from the page over USB
+// serial or Bluetooth (pen-link.js): pen down/up and the gain become SET_STATE, a change of pen
+// uploads its pattern. Whatever the pen does, the page's own sound and ink go on. When the
+// server itself drives a pen (the serve command's device option), the panel shows that bridge's
+// status too. window.realpen.penDevice is the link's status; window.realpen.penLink the link.
+//
 // URL parameters preset the page for a study: ?pen=marker&modality=tactile&ink=hidden&tactile=audio
 //
 // A pen whose audio does not load (or decode) never breaks the page: picking it keeps the
@@ -23,7 +29,8 @@ import { CSS_PX_PER_MM, MOUSE_PRESSURE, SPEED_WINDOW_MS } from './pen.js';
 import { AudioEngine, startOnActivation } from './audio.js';
 import { Ink, inkStyle } from './ink.js';
 import { Link } from './link.js';
-import { Writer, liveState } from './writer.js';
+import { Writer, liveState, tactileOn } from './writer.js';
+import { PenLink, support as penSupport } from './pen-link.js';
 import { VibrationGrid } from './grid.js';
 
 const MODALITIES = ['tactile', 'auditory', 'auditory-tactile', 'none'];
@@ -91,6 +98,25 @@ Object.defineProperties(state, {
   inkedPixels: { value: () => ink.inkedPixels() },
 });
 
+// The pen's own link: it never waits on the page, nor the page on it.
+const penLink = new PenLink({
+  fetchPattern: (name, rate) => getBytes(
+    `api/pens/${encodeURIComponent(name)}/pen-pattern?rate=${rate}`),
+  onChange: scheduleStatus,
+});
+Object.defineProperties(state, {
+  penDevice: { enumerable: true, get: () => ({ ...penLink.status }) },
+  penLink: { value: penLink },
+});
+
+/** The writer's gain → the pen: playing while down with tactile feedback, gain 0-1 of a_max. */
+function penGain(down, target) {
+  const c = state.coupling;
+  if (!c) return;
+  penLink.setState(down && tactileOn(state.modality), target / c.a_max,
+    Math.max(5, c.smoothing_ms));
+}
+
 const link = new Link(
   withToken(`${window.location.protocol === 'https:' ? 'wss' : 'ws'}://${window.location.host}/ws`),
   { client: `realpen-page/1 ${navigator.userAgent}`.slice(0, 200), onChange: scheduleStatus });
@@ -98,7 +124,7 @@ const link = new Link(
 state.stroke = link.lastStroke;
 
 const writer = new Writer(state, { surface: $('surface'), ink, audio, smoother, link,
-  onChange: scheduleStatus, onDown: () => $('hint').classList.add('gone') });
+  onChange: scheduleStatus, onDown: () => $('hint').classList.add('gone'), onGain: penGain });
 
 // Audio starts at the first event that may give user activation (see audio.js).
 startOnActivation(audio, scheduleStatus);
@@ -154,6 +180,7 @@ async function switchPen(chosen) {
   audio.use(decoded, chosen.coupling, chosen.name);
   mark('pens', chosen.name);
   saved.set('pen', chosen.name);
+  penLink.setPen(chosen.name);
   scheduleStatus();
   return true;
 }
@@ -273,6 +300,98 @@ function openCalibration() {
   dialog.showModal();
 }
 
+// ---- the pen panel ---------------------------------------------------------------------------
+
+const PEN_KIND = { usb: 'USB', ble: 'Bluetooth' };
+let bridge = null; // the server's GET /api/device, when it drives a pen
+let bridgeTimer = null;
+
+function setupPenPanel() {
+  const can = penSupport();
+  if (!can.serial || !can.bluetooth) {
+    const missing = [!can.serial && 'USB serial (Web Serial)',
+      !can.bluetooth && 'Bluetooth (Web Bluetooth)'].filter(Boolean).join(' or ');
+    $('pen-note').textContent = `This browser cannot reach a pen over ${missing}. Chrome or `
+      + 'Edge on a computer can; or let the server drive the pen (realpen serve\'s device '
+      + 'option).';
+    $('pen-note').hidden = false;
+  }
+  const run = (action) => async () => {
+    try {
+      await action();
+    } catch (error) {
+      penLink.update({ state: 'error', message: String((error && error.message) || error) });
+    }
+  };
+  $('pen-usb').addEventListener('click', run(() => penLink.connectSerial()));
+  $('pen-ble').addEventListener('click', run(() => penLink.connectBluetooth()));
+  $('pen-disconnect').addEventListener('click', run(() => penLink.disconnect()));
+  $('pen-device').addEventListener('click', () => {
+    const panel = $('pen-panel');
+    panel.hidden = !panel.hidden;
+    $('pen-device').setAttribute('aria-expanded', String(!panel.hidden));
+  });
+  pollBridge();
+}
+
+/** The server's own pen (the serve command's device option), shown in the panel while there
+ *  is one; asked every 1.5 s while the panel is open, every 5 s while it is closed. */
+async function pollBridge() {
+  clearTimeout(bridgeTimer);
+  try {
+    const response = await fetch(withToken('api/device'), { cache: 'no-store' });
+    if (response.status === 404) return; // a server without the route: nothing to show
+    bridge = response.ok ? await response.json() : null;
+  } catch { bridge = null; }
+  scheduleStatus();
+  bridgeTimer = setTimeout(pollBridge, $('pen-panel').hidden ? 5000 : 1500);
+}
+
+function renderPen() {
+  const s = penLink.status;
+  const button = $('pen-device');
+  button.dataset.state = s.state;
+  const server = bridge && bridge.kind !== 'log' ? bridge : null;
+  let short = 'Pen';
+  if (penLink.connected) short = `Pen · ${PEN_KIND[s.kind] || s.kind}`;
+  else if (s.state === 'connecting') short = 'Pen · connecting…';
+  else if (s.state === 'disconnected') short = 'Pen · lost';
+  else if (s.state === 'error') short = 'Pen · problem';
+  else if (server) short = `Pen · server${server.connected === false ? ' (lost)' : ''}`;
+  $('pen-device-text').textContent = short;
+  button.dataset.server = server ? String(server.connected) : '';
+  $('pen-status').textContent = s.message;
+  $('pen-status').dataset.state = s.state;
+  const meta = [];
+  if (penLink.connected && s.battery !== null) meta.push(`battery ${s.battery} %`);
+  if (penLink.connected && s.batteryMv !== null) {
+    meta.push(`battery ${(s.batteryMv / 1000).toFixed(2)} V`);
+  }
+  if (s.underruns) meta.push(`${s.underruns} underrun${s.underruns > 1 ? 's' : ''} at the pen`);
+  if (s.errors) meta.push(`${s.errors} bad frame${s.errors > 1 ? 's' : ''} from the pen`);
+  $('pen-meta').hidden = !meta.length;
+  $('pen-meta').textContent = meta.join(' · ');
+  const progress = $('pen-progress');
+  progress.hidden = s.progress === null || s.progress === undefined;
+  if (!progress.hidden) $('pen-progress-bar').style.width = `${(s.progress * 100).toFixed(1)}%`;
+  // While a pen is (being) connected, or Bluetooth is reconnecting, only Disconnect is offered;
+  // otherwise what the browser can (a lost USB port may be picked again).
+  const active = penLink.connected || s.state === 'connecting'
+    || (s.state === 'disconnected' && !penLink.userClosed && s.kind === 'ble');
+  const can = penSupport();
+  $('pen-disconnect').hidden = !active;
+  $('pen-usb').hidden = active || !can.serial;
+  $('pen-ble').hidden = active || !can.bluetooth;
+  const line = $('pen-bridge');
+  line.hidden = !server;
+  if (server) {
+    const how = { true: 'connected', false: 'not connected' }[server.connected] || 'no status';
+    line.textContent = `Server pen (${server.name}): ${how}`
+      + `${server.message ? ` — ${server.message}` : ''}`;
+    line.dataset.connected = String(server.connected);
+  }
+}
+
 // ---- status bar -----------------------------------------------------------------------------
 
 let statusQueued = false;
@@ -305,6 +424,7 @@ function renderStatus() {
   const shown = state.coupling ? Math.min(state.targetGain / state.coupling.a_max, 1) : 0;
   $('st-gain-bar').style.width = `${(shown * 100).toFixed(1)}%`;
   $('st-gain-value').textContent = state.targetGain.toFixed(2);
+  renderPen();
 }
 
 // ---- start ---------------------------------------------------------------------------------
@@ -341,6 +461,7 @@ async function start() {
     $('clear').addEventListener('click', () => ink.clear());
     $('notice-close').addEventListener('click', clearNotice);
     $('notice').addEventListener('pointerdown', (event) => event.stopPropagation()); // not a stroke
+    setupPenPanel();
     selectModality(state.modality);
     selectInk(state.ink);
     setCalibration(state.pxPerMm, state.calibrated);

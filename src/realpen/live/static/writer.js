@@ -63,11 +63,14 @@ export class Writer {
    * page's Ink, AudioEngine, Smoother and Link.
    * onChange(): something shown changed; onDown(): a stroke started;
    * enabled(): whether a pen-down starts a stroke now (default: once a pen is loaded);
-   * extra(): fields added to each pen_down (a study's session and trial).
+   * extra(): fields added to each pen_down (a study's session and trial);
+   * onGain(down, target): every sample's Eq. 1 target gain while the pen is down, and
+   * (false, 0) at pen up (the page's direct pen link follows them).
    */
   constructor(state, { surface, ink, audio, smoother, link, onChange = () => {}, onDown = () => {},
-    enabled = () => true, extra = () => ({}) }) {
-    Object.assign(this, { state, ink, audio, smoother, link, onChange, onDown, enabled, extra });
+    enabled = () => true, extra = () => ({}), onGain = () => {} }) {
+    Object.assign(this, { state, ink, audio, smoother, link, onChange, onDown, enabled, extra,
+      onGain });
     this.lastSentTarget = null;
     this.sampleIndex = 0; // samples of the current stroke sent so far
     this.tracker = new PenTracker(surface, { pxPerMm: state.pxPerMm,
@@ -97,6 +100,7 @@ export class Writer {
     state.tactileTarget = tactileOn(state.modality) && state.tactileAudio ? target / c.a_max : 0;
     this.audio.set(soundOn(state.modality) ? target : 0, state.tactileTarget, state.playbackRate);
     state.pointTargets = this.audio.follow(last.speed, last.pressure);
+    this.onGain(true, target);
     if (target !== this.lastSentTarget) {
       this.link.send({ type: 'gain', stroke: state.stroke, t: last.t, target });
       this.lastSentTarget = target;
@@ -159,6 +163,7 @@ export class Writer {
     this.record(t, 0, 0, 0, smoothed);
     Object.assign(state, { pressure: 0, speed: 0, targetGain: 0, tactileTarget: 0 });
     this.audio.set(0, 0, state.playbackRate);
+    this.onGain(false, 0);
     this.link.send({ type: 'pen_up', stroke: state.stroke, t });
     this.ink.end();
     this.onChange();

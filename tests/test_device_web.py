@@ -1,0 +1,638 @@
+"""The page's own pen links in a real browser: the JS codec, Web Serial and Web Bluetooth.
+
+Debian's Chromium driven by Playwright (as in test_live_browser.py), against the live app served
+by uvicorn in this process:
+
+- the JS codec (static/pen-protocol.js) against tests/data/protocol_vectors.json and against
+  protocol.py on random frames;
+- Web Serial: ``navigator.serial`` is replaced (before the page's scripts run) by a fake whose
+  port streams are bridged with ``page.expose_function`` to a SimPen's pseudo-terminal, so the
+  page talks to the real firmware under the MicroPython Unix port; the firmware's trace shows
+  the page's SET_STATE and the uploaded pattern's swap;
+- Web Bluetooth under Chromium's own emulation (CDP ``BluetoothEmulation``, which needs
+  ``--enable-experimental-web-platform-features``): an emulated peripheral with the pen's GATT
+  service whose characteristic operations are answered by the pen core (firmware/pico rp_pen
+  and rp_player imported under CPython), and the device chooser answered through CDP
+  ``DeviceAccess``.
+
+What Chromium's emulation cannot do: CDP ``BluetoothEmulation`` (Chromium 156) has no command
+that makes the emulated peripheral send a notification; an unsolicited
+``simulateCharacteristicOperationResponse`` is accepted and dropped. The pen's replies reach the
+page the only other way the emulation offers: the test asks the page to read TX
+(``readValue()``), whose value the emulation answers with the pen core's output, and Chromium
+fires the same ``characteristicvaluechanged`` event a notification fires (Web Bluetooth spec,
+readValue), so the page's notification handler, decoder and upload run as with a real pen. TX
+carries the read property in the emulation for that only; the firmware's TX is notify-only.
+"""
+
+from __future__ import annotations
+
+import base64
+import functools
+import json
+import random
+import sys
+import time
+import zlib
+from array import array
+from pathlib import Path
+
+import pytest
+from live_support import CHROMIUM, CHROMIUM_ARGS, CHROMIUM_MISSING
+
+from realpen.device import protocol as P
+
+ROOT = Path(__file__).resolve().parents[1]
+ARTIFACTS = ROOT / "test-artifacts"
+VECTORS = json.loads((ROOT / "tests" / "data" / "protocol_vectors.json").read_text())
+BLE_ARGS = [*CHROMIUM_ARGS, "--enable-experimental-web-platform-features"]
+CCCD = "00002902-0000-1000-8000-00805f9b34fb"  # Client Characteristic Configuration
+
+if not CHROMIUM.exists():
+    pytest.skip(CHROMIUM_MISSING, allow_module_level=True)
+sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+
+
+class Server:
+    """The live app in this process, uvicorn on a thread. It starts in the background (most of
+    it is importing the app) while the browser launches; ``base`` waits for it."""
+
+    def __init__(self, folder: Path):
+        import socket
+        import threading
+
+        self.folder = folder
+        self.socket = socket.socket()
+        self.socket.bind(("127.0.0.1", 0))
+        self.server = None
+        self.problem: BaseException | None = None
+        self.thread = threading.Thread(target=self.run, daemon=True)
+        self.thread.start()
+
+    def run(self):
+        try:
+            import uvicorn
+
+            from realpen.live.app import LiveSettings, create_app
+
+            app = create_app(LiveSettings.loopback(store=self.folder / "strokes.sqlite3"))
+            self.server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
+            self.server.run(sockets=[self.socket])
+        except BaseException as error:  # reported by ``base``
+            self.problem = error
+
+    @property
+    def base(self) -> str:
+        deadline = time.monotonic() + 30
+        while self.server is None or not self.server.started:
+            if self.problem or not self.thread.is_alive() or time.monotonic() > deadline:
+                raise RuntimeError(f"the live app did not start: {self.problem!r}")
+            time.sleep(0.01)
+        return f"http://127.0.0.1:{self.socket.getsockname()[1]}/"
+
+    url = base
+
+    def stop(self):
+        if self.server is not None:
+            self.server.should_exit = True
+        self.thread.join(timeout=10)
+        self.socket.close()
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("web")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("REALPEN_HOME", str(folder / "home"))  # no user profiles of this machine
+        served = Server(folder)
+        try:
+            yield served
+        finally:
+            served.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with sync_api.sync_playwright() as playwright:
+        instance = playwright.chromium.launch(executable_path=str(CHROMIUM), args=BLE_ARGS)
+        yield instance
+        instance.close()
+
+
+def open_page(browser, server, init_script: str | None = None):
+    context = browser.new_context(viewport={"width": 1180, "height": 820})
+    context.set_default_timeout(10_000)
+    if init_script:
+        context.add_init_script(init_script)
+    page = context.new_page()
+    problems: list[str] = []
+    page.on("pageerror", lambda error: problems.append(str(error)))
+    page.goto(server.url)
+    page.wait_for_function("() => window.realpen && window.realpen.ready")
+    return context, page, problems
+
+
+# ---- the codec ------------------------------------------------------------------------------
+
+CHECK_VECTORS = """async ([vectors, randoms, crc32s]) => {
+  const P = await import('/static/pen-protocol.js');
+  const fails = [];
+  const hex = P.toHex;
+  const same = (what, got, want) => {
+    const [g, w] = [JSON.stringify(got), JSON.stringify(want)];
+    if (g !== w) fails.push(`${what}: ${g} != ${w}`);
+  };
+  const throws = (what, fn) => {
+    try { fn(); fails.push(`${what}: no error`); } catch (e) {
+      if (!(e instanceof P.ProtocolError)) fails.push(`${what}: ${e}`);
+    }
+  };
+  for (const c of vectors.crc16) same(`crc16 ${c.data.slice(0, 20)}`, P.crc16(P.fromHex(c.data)), c.crc16);
+  for (const c of vectors.cobs) {
+    same(`cobs encode ${c.raw.slice(0, 20)}`, hex(P.cobsEncode(P.fromHex(c.raw))), c.encoded);
+    same(`cobs decode ${c.encoded.slice(0, 20)}`, hex(P.cobsDecode(P.fromHex(c.encoded))), c.raw);
+  }
+  throws('cobs zero inside', () => P.cobsDecode(P.fromHex('030100')));
+  throws('cobs past the end', () => P.cobsDecode(P.fromHex('05112233')));
+  const whole = [];
+  for (const f of vectors.frames) {
+    const [pack, unpack] = P.MESSAGES[f.pack];
+    const bytesArg = f.pack === 'pack_pattern_chunk';
+    const args = bytesArg ? [f.args[0], P.fromHex(f.args[1])] : f.args;
+    const payload = pack(...args);
+    same(`${f.name} payload`, hex(payload), f.payload_hex);
+    const frame = P.encodeFrame(f.type, f.seq, payload);
+    same(`${f.name} frame`, hex(frame), f.frame_hex);
+    whole.push(frame);
+    let got = unpack(P.fromHex(f.payload_hex));
+    if (bytesArg) got = [got[0], hex(got[1])];
+    same(`${f.name} unpack`, Array.isArray(got) ? got : [got], f.args);
+    const decoder = new P.FrameDecoder();
+    const frames = [];
+    for (const byte of P.fromHex(f.frame_hex)) frames.push(...decoder.feed([byte]));
+    same(`${f.name} decoded byte by byte`, frames.map(([t, s, p]) => [t, s, hex(p)]),
+      [[f.type, f.seq, f.payload_hex]]);
+    throws(`${f.name} unpack of nothing`, () => unpack(new Uint8Array(0)));
+    throws(`${f.name} unpack of 40 bytes more`, () => unpack(new Uint8Array(payload.length + 40)));
+  }
+  throws('a name longer than 32 bytes', () => P.packInfo(1, 1, 0, 0, 8000, 1, 0, 'x'.repeat(33)));
+  throws('a chunk longer than MAX_CHUNK', () => P.packPatternChunk(0, new Uint8Array(P.MAX_CHUNK + 1)));
+  for (const s of vectors.streams) {
+    same(`stream "${s.why}"`, new P.FrameDecoder().feed(P.fromHex(s.stream_hex)).length, s.frames);
+  }
+  // All the frames in one stream cut at random places: every frame, in order.
+  const stream = P.fromHex(whole.map(hex).join(''));
+  const decoder = new P.FrameDecoder();
+  const out = [];
+  for (let at = 0; at < stream.length;) {
+    const n = 1 + Math.floor(Math.random() * 40);
+    out.push(...decoder.feed(stream.subarray(at, at + n)));
+    at += n;
+  }
+  same('random cuts', out.map(([t, s]) => [t, s]), vectors.frames.map((f) => [f.type, f.seq]));
+  same('random cuts: no errors', decoder.errors, 0);
+  const encoded = randoms.map(([t, s, p]) => hex(P.encodeFrame(t, s, P.fromHex(p))));
+  const crcs = crc32s.map(([data]) => P.crc32(P.fromHex(data)));
+  same('crc32 of 123456789', P.crc32(new TextEncoder().encode('123456789')), 0xCBF43926);
+  same('PROTOCOL_VERSION', P.PROTOCOL_VERSION, vectors.protocol_version);
+  return { fails, encoded, crcs };
+}"""
+
+
+def test_codec_passes_the_vectors_in_the_browser(browser, server):
+    """pen-protocol.js: every vector (CRC-16, COBS, frames, pack/unpack, streams), random
+    frames encoded as protocol.py encodes them, and CRC-32 as zlib computes it."""
+    rng = random.Random(12)
+    randoms = [(rng.randrange(256), rng.randrange(256),
+                rng.randbytes(rng.choice([0, 1, 2, 250, 251, 252, rng.randrange(253)])).hex())
+               for _ in range(300)]
+    crc32s = [(rng.randbytes(n).hex(),) for n in (0, 1, 7, 1000, 24000)]
+    context = browser.new_context()
+    page = context.new_page()
+    try:
+        page.goto(f"{server.base}static/pen-protocol.js")  # any page of the origin will do
+        result = page.evaluate(CHECK_VECTORS, [VECTORS, randoms, crc32s])
+    finally:
+        context.close()
+    assert result["fails"] == []
+    assert result["encoded"] == [P.encode_frame(t, s, bytes.fromhex(p)).hex()
+                                 for t, s, p in randoms]
+    assert result["crcs"] == [zlib.crc32(bytes.fromhex(data)) for (data,) in crc32s]
+
+
+# ---- Web Serial: a fake navigator.serial bridged to the real firmware -------------------------
+
+# Replaces navigator.serial before the page's scripts run. The one port's streams call the
+# functions the test exposes: __penOpen(baud) → bool, __penRead() → base64 of the bytes waiting
+# ('' when none, null when the port is gone), __penWrite(base64), __penClose().
+FAKE_SERIAL = """(() => {
+  const fromB64 = (text) => Uint8Array.from(atob(text), (c) => c.charCodeAt(0));
+  const toB64 = (bytes) => btoa(Array.from(bytes, (b) => String.fromCharCode(b)).join(''));
+  class FakePort extends EventTarget {
+    constructor() { super(); this.readable = null; this.writable = null; }
+    getInfo() { return { usbVendorId: 0x2e8a, usbProductId: 0x0005 }; }
+    async open(options) {
+      if (!(await window.__penOpen(options.baudRate))) {
+        throw new DOMException('Failed to open serial port.', 'NetworkError');
+      }
+      const port = this;
+      this.readable = new ReadableStream({
+        async pull(controller) {
+          for (;;) {
+            const data = await window.__penRead();
+            if (data === null) {
+              port.readable = null;
+              controller.error(new DOMException('The device has been lost.', 'NetworkError'));
+              return;
+            }
+            if (data.length) { controller.enqueue(fromB64(data)); return; }
+            await new Promise((resolve) => setTimeout(resolve, 3));
+          }
+        },
+      });
+      // A write resolves once queued, as a real port's does; the queue goes to the pty in
+      // one call per task (one bridge call per chunk would make the upload crawl).
+      let queued = [];
+      const flush = () => {
+        const bytes = queued.flatMap((chunk) => Array.from(chunk));
+        queued = [];
+        return window.__penWrite(toB64(bytes));
+      };
+      let flushing = Promise.resolve();
+      this.writable = new WritableStream({
+        write(chunk) {
+          const task = () => new Promise((resolve) => setTimeout(resolve, 0));
+          if (!queued.length) flushing = flushing.then(task).then(flush);
+          queued.push(chunk);
+        },
+        close() { return flushing; },
+      });
+    }
+    async close() { this.readable = null; this.writable = null; await window.__penClose(); }
+  }
+  const port = new FakePort();
+  const serial = new EventTarget();
+  serial.requestPort = async () => port;
+  serial.getPorts = async () => [port];
+  Object.defineProperty(Navigator.prototype, 'serial', { get: () => serial, configurable: true });
+})();"""
+
+
+class SerialBridge:
+    """The fake port's other end: the SimPen's pseudo-terminal through pyserial."""
+
+    def __init__(self):
+        self.sim = None
+        self.port = None
+        self.written = bytearray()
+
+    def expose(self, page):
+        page.expose_function("__penOpen", self.open)
+        page.expose_function("__penRead", self.read)
+        page.expose_function("__penWrite", self.write)
+        page.expose_function("__penClose", self.close)
+
+    def open(self, baud):
+        serial = pytest.importorskip("serial")
+        self.port = serial.Serial(self.sim.port, baud, timeout=0)
+        return True
+
+    def read(self):
+        try:
+            data = self.port.read(4096) if self.port else None
+        except OSError:  # SerialException too: the firmware is gone and the pty with it
+            data = None
+        return None if data is None else base64.b64encode(data).decode()
+
+    def write(self, text):
+        data = base64.b64decode(text)
+        self.written += data
+        try:
+            if self.port:
+                self.port.write(data)
+        except OSError:  # the firmware is gone: the read side tells the page
+            pass
+
+    def close(self):
+        if self.port:
+            self.port.close()
+            self.port = None
+
+
+def pen_stroke(page, n=12, x0=300.0, y0=300.0, pressure=0.6):
+    """A pen stroke on the writing surface through CDP (trusted pen events)."""
+    cdp = page.context.new_cdp_session(page)
+    box = page.locator("#ink").bounding_box()
+    t0 = time.time()
+
+    def event(kind, i, force):
+        cdp.send("Input.dispatchMouseEvent", {
+            "type": kind, "x": box["x"] + x0 + 6 * i, "y": box["y"] + y0, "button": "left",
+            "buttons": 0 if kind == "mouseReleased" else 1, "clickCount": 1,
+            "pointerType": "pen", "force": force, "timestamp": t0 + 0.008 * i})
+
+    event("mousePressed", 0, pressure)
+    for i in range(1, n):
+        event("mouseMoved", i, pressure)
+        page.wait_for_timeout(8)
+    event("mouseReleased", n, 0.0)
+    cdp.detach()
+
+
+def trace_events(path: Path) -> list[dict]:
+    """The firmware's trace so far (a last line still being written is left for later)."""
+    events = []
+    for line in path.read_text().splitlines():
+        try:
+            events.append(json.loads(line))
+        except ValueError:
+            break
+    return events
+
+
+def test_web_serial_drives_the_firmware(browser, server, tmp_path):
+    """Connect USB → HELLO/INFO, the pen's pattern uploaded at the pen's rate and swapped in at
+    the firmware; a pen stroke → SET_STATE playing=1 with the Eq. 1 gain, then playing=0;
+    another pen picked → its pattern uploaded and swapped in; the firmware stops → the panel
+    says so and the page writes and sounds on; an old firmware → one clear line."""
+    from realpen.device.sim import SimPen
+
+    httpx = pytest.importorskip("httpx")
+    bridge = SerialBridge()
+    context, page, problems = open_page(browser, server, FAKE_SERIAL)
+    try:
+        bridge.expose(page)
+        pen = page.evaluate("window.realpen.pen")
+        expected = httpx.get(f"{server.base}api/pens/{pen}/pen-pattern",
+                             params={"rate": 8000}).content
+        trace = tmp_path / "trace.jsonl"
+        with SimPen(trace=trace) as sim:
+            bridge.sim = sim
+            page.click("#pen-device")
+            assert page.is_visible("#pen-usb") and page.is_visible("#pen-ble")
+            page.click("#pen-usb")
+            page.wait_for_function("(pen) => window.realpen.penDevice.pattern === pen", arg=pen)
+            status = page.evaluate("window.realpen.penDevice")
+            assert status["info"]["sampleRate"] == 8000 and status["kind"] == "usb"
+            page.wait_for_function(f"() => document.getElementById('pen-status').textContent"
+                                   f" === {json.dumps(status['message'])}")
+            assert status["message"].startswith("RealPen on USB 2e8a:0005 (firmware ")
+            assert status["message"].endswith(f": {pen} pattern loaded (1.50 s).")
+            assert page.is_hidden("#pen-usb") and page.is_visible("#pen-disconnect")
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "pen-panel-usb.png"))
+            pen_stroke(page)
+
+            def lifted():  # the firmware has applied a playing state, then the pen-up state
+                states = [e for e in trace_events(trace) if e["event"] == "set_state"]
+                return any(e["playing"] for e in states) and not states[-1]["playing"]
+
+            deadline = time.monotonic() + 5
+            while not lifted() and time.monotonic() < deadline:
+                page.wait_for_timeout(10)  # the bridge works while Playwright waits
+            # Another pen picked on the page: its pattern goes to the pen, which swaps it in.
+            other = next(p for p in ("ballpoint", "marker", "pencil") if p != pen)
+            page.click(f'#pens [data-value="{other}"]')
+            page.wait_for_function("(pen) => window.realpen.penDevice.pattern === pen", arg=other)
+            deadline = time.monotonic() + 5
+            while (sum(e["event"] == "swap" for e in trace_events(trace)) < 2
+                   and time.monotonic() < deadline):
+                page.wait_for_timeout(10)
+            events = trace_events(trace)
+        # The firmware's own record: what the page sent, the pattern it committed.
+        states = [e for e in events if e["event"] == "set_state"]
+        playing = [e for e in states if e["playing"] == 1]
+        assert playing and all(e["rate"] == P.RATE_ONE for e in states)
+        assert any(e["gain"] > 0 for e in playing)
+        assert states[-1]["playing"] == 0
+        swaps = [e for e in events if e["event"] == "swap"]
+        second = httpx.get(f"{server.base}api/pens/{other}/pen-pattern", params={"rate": 8000})
+        assert [s["id"] for s in swaps] == [zlib.crc32(expected) & 0xFFFF,
+                                            zlib.crc32(second.content) & 0xFFFF]
+        frames = P.FrameDecoder().feed(bytes(bridge.written))
+        chunks = b"".join(P.unpack_pattern_chunk(p)[1] for t, _, p in frames
+                          if t == P.PATTERN_CHUNK)
+        assert chunks == expected + second.content
+        begin = next(P.unpack_pattern_begin(p) for t, _, p in frames if t == P.PATTERN_BEGIN)
+        assert begin[1:] == (len(expected) // 2, 8000, P.FORMAT_S16LE, zlib.crc32(expected))
+        # The firmware is gone (SimPen stopped): the panel says so, the page writes and sounds on.
+        page.wait_for_function("() => document.getElementById('pen-status').textContent"
+                               ".startsWith('Pen disconnected')")
+        assert page.evaluate("window.realpen.penDevice.state") == "disconnected"
+        assert page.evaluate("() => window.realpen.audio.state") == "running"
+        strokes = page.evaluate("window.realpen.strokes")
+        pen_stroke(page)
+        page.wait_for_function("(n) => window.realpen.strokes === n + 1 && !window.realpen.down",
+                               arg=strokes)
+        assert max(e["target"] for e in page.evaluate("window.realpen.trace")[-10:]) > 0
+        # An old pen: HELLO refused with E_VERSION.
+        with SimPen(protocol_version=2) as sim:
+            bridge.sim = sim
+            page.click("#pen-usb")
+            page.wait_for_function("() => window.realpen.penDevice.state === 'error'")
+            assert "does not speak protocol 1" in page.text_content("#pen-status")
+        assert problems == []
+    finally:
+        bridge.close()
+        context.close()
+
+
+# ---- Web Bluetooth: Chromium's emulated peripheral answered by the pen core -----------------
+
+BATTERY_SERVICE = "0000180f-0000-1000-8000-00805f9b34fb"
+BATTERY_LEVEL = "00002a19-0000-1000-8000-00805f9b34fb"
+NO_SERIAL = "delete Navigator.prototype.serial;"  # a browser with Web Bluetooth only
+# Deliver what the pen core has sent: the page's link reads TX (see the module docstring).
+READ_TX = """() => {
+  const t = window.realpen.penLink.transport;
+  if (t && t.tx) t.tx.readValue().catch(() => {});
+}"""
+
+
+class EmulatedPen:
+    """A peripheral in Chromium's Bluetooth emulation with the pen's GATT service (RX, TX +
+    its CCCD, INFO) and the Battery service; its operations go to the pen core (rp_pen under
+    CPython), which records the states it applies and the patterns it swaps in."""
+
+    ADDRESS = "52:50:00:00:00:01"
+
+    def __init__(self, browser, page):
+        sys.path.insert(0, str(ROOT / "firmware" / "pico"))
+        try:
+            import rp_pen
+        finally:
+            sys.path.remove(str(ROOT / "firmware" / "pico"))
+        self.page = page
+        self.states: list[tuple] = []
+        self.swaps: list[int] = []
+        self.pen = rp_pen.Pen(
+            name="RealPen", sample_rate=8000, features=P.FEATURE_BLE | P.FEATURE_RATE,
+            on_state=lambda t_ns, sample, *state: self.states.append(state),
+            on_swap=lambda sample, pattern_id: self.swaps.append(pattern_id))
+        self.out = bytearray()
+        self.link = self.pen.add_link(self.out.extend, "ble")
+        self.block = array("h", bytes(64))
+        self.received = bytearray()
+        self.writes: list[int] = []  # bytes of each RX write
+        self.reading = False
+        self.queue: list[tuple[str, dict]] = []
+        self.bt = browser.new_browser_cdp_session()  # BluetoothEmulation is a browser domain
+        self.cdp = page.context.new_cdp_session(page)
+        for name in ("gattOperationReceived", "characteristicOperationReceived",
+                     "descriptorOperationReceived"):
+            self.bt.on(f"BluetoothEmulation.{name}",
+                       functools.partial(lambda n, e: self.queue.append((n, e)), name))
+        self.cdp.on("DeviceAccess.deviceRequestPrompted",
+                    lambda e: self.queue.append(("prompt", e)))
+        self.cdp.send("DeviceAccess.enable")
+        self.bt.send("BluetoothEmulation.enable", {"state": "powered-on", "leSupported": True})
+        self.bt.send("BluetoothEmulation.simulatePreconnectedPeripheral", {
+            "address": self.ADDRESS, "name": "RealPen", "manufacturerData": [],
+            "knownServiceUuids": [P.BLE_SERVICE]})
+        self.build_gatt()
+
+    def build_gatt(self):
+        """The pen's GATT database (again after a disconnection: Chromium forgets a device's
+        services when its GATT connection drops, as it must rediscover them from a real one)."""
+        service = self.add_service(P.BLE_SERVICE)
+        self.rx = self.add_characteristic(service, P.BLE_RX, writeWithoutResponse=True)
+        self.tx = self.add_characteristic(service, P.BLE_TX, notify=True, read=True)
+        self.bt.send("BluetoothEmulation.addDescriptor",
+                     {"characteristicId": self.tx, "descriptorUuid": CCCD})
+        self.info = self.add_characteristic(service, P.BLE_INFO, read=True)
+        self.battery = self.add_characteristic(self.add_service(BATTERY_SERVICE), BATTERY_LEVEL,
+                                               read=True, notify=True)
+
+    def add_service(self, uuid):
+        return self.bt.send("BluetoothEmulation.addService",
+                            {"address": self.ADDRESS, "serviceUuid": uuid})["serviceId"]
+
+    def add_characteristic(self, service, uuid, **properties):
+        return self.bt.send("BluetoothEmulation.addCharacteristic", {
+            "serviceId": service, "characteristicUuid": uuid,
+            "properties": properties})["characteristicId"]
+
+    def respond(self, characteristic, kind, data: bytes | None = None):
+        args = {"characteristicId": characteristic, "type": kind, "code": 0}
+        if data is not None:
+            args["data"] = base64.b64encode(data).decode()
+        self.bt.send("BluetoothEmulation.simulateCharacteristicOperationResponse", args)
+
+    def handle(self, name, event):
+        if name == "prompt":  # the device chooser: pick the pen (it may be announced twice)
+            try:
+                self.cdp.send("DeviceAccess.selectPrompt",
+                              {"id": event["id"], "deviceId": event["devices"][0]["id"]})
+            except sync_api.Error:
+                pass  # the second announcement of a prompt already answered
+        elif name == "gattOperationReceived":  # connection, service discovery: both succeed
+            self.bt.send("BluetoothEmulation.simulateGATTOperationResponse",
+                         {"address": self.ADDRESS, "type": event["type"], "code": 0})
+        elif name == "descriptorOperationReceived":
+            args = {"descriptorId": event["descriptorId"], "type": event["type"], "code": 0}
+            if event["type"] == "read":
+                args["data"] = base64.b64encode(b"\x00\x00").decode()
+            self.bt.send("BluetoothEmulation.simulateDescriptorOperationResponse", args)
+        else:
+            cid, kind = event["characteristicId"], event["type"]
+            if kind == "write":
+                assert event["writeType"] == "write-without-response" and cid == self.rx
+                data = base64.b64decode(event["data"])
+                self.writes.append(len(data))
+                self.received += data
+                self.link.feed(data)
+                self.pen.fill(self.block)  # the audio loop: states and swaps take effect
+            elif kind == "read" and cid == self.info:
+                self.respond(cid, kind, self.pen.info_payload())
+            elif kind == "read" and cid == self.battery:
+                self.respond(cid, kind, bytes([87]))
+            elif kind == "read" and cid == self.tx:
+                self.respond(cid, kind, bytes(self.out[:512]))
+                del self.out[:512]
+                self.reading = False
+            else:  # (un)subscribe
+                self.respond(cid, kind)
+
+    def pump(self, until, timeout=8.0):
+        """Answer the emulation until ``until()`` is true."""
+        deadline = time.monotonic() + timeout
+        while not until():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the page and the emulated pen stalled: "
+                                   f"{self.page.evaluate('window.realpen.penDevice')}")
+            self.page.wait_for_timeout(4)  # CDP events are delivered while Playwright waits
+            while self.queue:
+                self.handle(*self.queue.pop(0))
+            if self.out and not self.reading:
+                self.reading = True
+                self.page.evaluate(READ_TX)
+
+    def close(self):
+        self.bt.send("BluetoothEmulation.disable")
+        self.bt.detach()
+
+
+def test_web_bluetooth_under_chromium_emulation(browser, server):
+    """Connect Bluetooth → the chooser (CDP DeviceAccess) picks the emulated pen, INFO is read,
+    TX subscribed, the pattern uploaded through RX in writes ≤ 244 B and the pen core swaps it
+    in; a pen stroke → SET_STATE playing=1 then 0 at the pen core; a dropped connection → the
+    panel says so, the link reconnects and uploads again. Without Web Serial the USB button
+    gives way to a plain note; the server's own pen shows in the panel."""
+    httpx = pytest.importorskip("httpx")
+    context = browser.new_context(viewport={"width": 1180, "height": 820})
+    context.set_default_timeout(10_000)
+    context.add_init_script(NO_SERIAL)
+    context.route("**/api/device", lambda route: route.fulfill(json={
+        "name": "sim", "kind": "sim", "connected": True, "message": "RealPen 1.0.0, 8000 Hz",
+        "info": None}))
+    page = context.new_page()
+    problems: list[str] = []
+    page.on("pageerror", lambda error: problems.append(str(error)))
+    page.goto(server.url)
+    page.wait_for_function("() => window.realpen && window.realpen.ready")
+    pen = None
+    try:
+        pen = EmulatedPen(browser, page)
+        name = page.evaluate("window.realpen.pen")
+        expected = httpx.get(f"{server.base}api/pens/{name}/pen-pattern",
+                             params={"rate": 8000}).content
+        page.click("#pen-device")
+        assert not page.is_visible("#pen-usb") and page.is_visible("#pen-ble")
+        assert "cannot reach a pen over USB serial" in page.text_content("#pen-note")
+        page.wait_for_function("() => !document.getElementById('pen-bridge').hidden")
+        assert page.text_content("#pen-bridge").startswith("Server pen (sim): connected")
+        page.click("#pen-ble", no_wait_after=True)
+        done = f"() => window.realpen.penDevice.pattern === {json.dumps(name)}"
+        pen.pump(lambda: page.evaluate(done))
+        status = page.evaluate("window.realpen.penDevice")
+        assert status["kind"] == "ble" and status["battery"] == 87
+        assert status["message"].startswith("RealPen on Bluetooth (firmware ")
+        page.wait_for_function("() => document.getElementById('pen-meta').textContent"
+                               " === 'battery 87 %'")
+        assert status["info"]["name"] == "RealPen" and status["info"]["sampleRate"] == 8000
+        pen.pump(lambda: pen.swaps)
+        assert pen.swaps == [zlib.crc32(expected) & 0xFFFF]
+        page.screenshot(path=str(ARTIFACTS / "pen-panel-ble.png"))
+        frames = P.FrameDecoder().feed(bytes(pen.received))
+        assert b"".join(P.unpack_pattern_chunk(p)[1] for t, _, p in frames
+                        if t == P.PATTERN_CHUNK) == expected
+        # A frame a write, each within one write at ATT MTU 247 (244 bytes).
+        assert len(pen.writes) == len(frames) and max(pen.writes) <= 244
+        pen_stroke(page)
+        pen.pump(lambda: any(s[0] == 1 for s in pen.states) and pen.states[-1][0] == 0)
+        assert any(s[0] == 1 and s[1] > 0 for s in pen.states)
+        assert all(s[2] == P.RATE_ONE for s in pen.states)
+        # The connection drops: the panel says so; the link connects again and uploads again.
+        begins = sum(t == P.PATTERN_BEGIN for t, _, _ in frames)
+        pen.bt.send("BluetoothEmulation.simulateGATTDisconnection", {"address": pen.ADDRESS})
+        pen.pump(lambda: "Pen disconnected" in page.text_content("#pen-status"))
+        assert page.evaluate("window.realpen.penDevice.state") == "disconnected"
+        pen.build_gatt()
+        pen.pump(lambda: page.evaluate(done + " && window.realpen.penDevice.state === 'connected'"))
+        frames = P.FrameDecoder().feed(bytes(pen.received))
+        assert sum(t == P.PATTERN_BEGIN for t, _, _ in frames) == begins + 1
+        assert problems == []
+    finally:
+        if pen is not None:
+            pen.close()
+        context.close()
