@@ -6,7 +6,7 @@ the real firmware (``firmware/pico``) under the MicroPython Unix port on a pseud
 a trace. A WebSocket client does what the page does on a pointer-down: it sends ``pen_down``,
 then a ``gain`` and a ``pen_up``, each waiting for its ack and ``--gap-ms`` apart, for
 ``--strokes`` strokes (after a warm-up stroke, which uploads the pattern). The firmware's trace
-has the SET_STATE each block of its player (32 samples, 4 ms) applied, with the time its frame
+has the SET_STATE each block of its player (16 samples, 2 ms) applied, with the time its frame
 was decoded; the gap keeps every frame in a block of its own. For every stroke
 
 - pointer-down → SET_STATE: the firmware's receipt of the stroke's ``SET_STATE(playing=1)``
@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--uploads", type=int, default=10)
     parser.add_argument("--gap-ms", type=float, default=10.0,
                         help="pause after each message (ms); the trace has the SET_STATE each "
-                             "4 ms block of the player applied, so messages closer than two "
+                             "2 ms block of the player applied, so messages closer than two "
                              "blocks would hide each other")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="bench_device_") as tmp:
@@ -211,7 +211,7 @@ def main(argv: list[str] | None = None) -> None:
     hidden = figures["hidden_down"] + figures["hidden_gain"]
     if hidden:
         print(f"  ({figures['hidden_down']} pen-down and {figures['hidden_gain']} gain SET_STATEs "
-              f"left out: decoded in the same 4 ms block as the next, the trace has only that)")
+              f"left out: decoded in the same 2 ms block as the next, the trace has only that)")
     print(f"  the warm-up stroke, a new pen (24 KB upload, then SET_STATE): "
           f"{figures['first'] / 1e6:.1f} ms")
     upload = upload_time(args.uploads)

@@ -10,8 +10,11 @@ air.
   response, TX notify, INFO read), Device Information (0x180A) and Battery (0x180F), advertising
   its name and service. RX bytes go to the firmware's own protocol core (``firmware/pico``:
   ``rp_pen.Pen`` with ``rp_player.Player``, imported under CPython), and the core's replies go
-  back as TX notifications in pieces of at most ATT MTU − 3 bytes. A render task drives the
-  player at the pen's sample rate, as the firmware's audio loop does.
+  back as TX notifications in pieces of at most ATT MTU − 3 bytes. As on the Pico
+  (``firmware/pico/ble_pico.py``), RX writes pile up in a buffer of the firmware's size that a
+  main-loop task empties every millisecond, and what does not fit is cut off silently, as
+  BTstack does: a host that has more in flight than that loses bytes here too. A render task
+  drives the player at the pen's sample rate, as the firmware's audio loop does.
 - :meth:`VirtualPen.client_backend` returns a ``bleak`` client backend class (a
   :class:`bleak.backends.client.BaseBleakClient`) implemented over a second bumble device on the
   same link; :meth:`VirtualPen.scanner_backend` a scanner backend. Pass them as ``backend=`` to
@@ -28,6 +31,7 @@ pen holds, the player — outlives that: for the pen it is a Bluetooth reconnect
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import re
 import sys
 import threading
@@ -72,7 +76,17 @@ PEN_MTU = 247  # the largest ATT MTU the pen accepts (the Pico W's BTstack defau
 HOST_MTU = 517  # what the host asks for (BlueZ asks for the ATT maximum)
 ADVERTISING_INTERVAL_MS = 20  # the shortest legal interval: a scan finds the pen in ~one interval
 RENDER_PERIOD_S = 0.004  # how often the render task catches the player up with the clock
-BLOCK_SAMPLES = 32  # samples the player renders per block (4 ms at 8 kHz, as the Pico's I2S)
+BLOCK_SAMPLES = 16  # samples the player renders per block (2 ms at 8 kHz, as on the Pico)
+MAIN_LOOP_PERIOD_S = 0.001  # how often the pen's main loop reads RX (the Pico's loop naps 1 ms)
+
+
+def firmware_rx_buffer() -> int:
+    """The RX buffer the Pico firmware asks BTstack for (``_RX_BUFFER`` in ble_pico.py), bytes."""
+    text = (FIRMWARE / "ble_pico.py").read_text()
+    found = re.search(r"^_RX_BUFFER = const\((\d+)\)", text, re.MULTILINE)
+    if found is None:
+        raise RuntimeError(f"{FIRMWARE / 'ble_pico.py'}: no _RX_BUFFER = const(N) line")
+    return int(found.group(1))
 _ADDRESS_RE = re.compile(r"^[0-9A-Fa-f]{2}(:[0-9A-Fa-f]{2}){5}$")
 
 
@@ -101,12 +115,15 @@ class VirtualPen:
         battery_percent: the Battery Level characteristic's value, 0 … 100 %.
         manufacturer, model: the Device Information strings.
         mtu: the largest ATT MTU the pen accepts, bytes.
+        rx_buffer: bytes of RX writes held until the main loop reads them (default: the Pico
+            firmware's); the rest of a write that does not fit is dropped.
 
     Attributes:
         pen: the firmware's ``rp_pen.Pen`` (its player, pattern and state are inspectable).
         tx_log: every byte the pen notified on TX, in order (see :meth:`sent_frames`).
         tx_pieces: the length in bytes of every TX notification sent, in order.
         rx_pieces: the length in bytes of every RX write received, in order.
+        rx_dropped: bytes of RX writes cut off because the RX buffer was full.
         connections: how many Bluetooth connections the pen has accepted.
         errors: exceptions the pen's code raised in bumble's callbacks or its render task
             (bumble only logs them; a test asserts this stays empty).
@@ -116,7 +133,8 @@ class VirtualPen:
                  rate: int = 8000, max_pattern_bytes: int = 32768, battery_percent: int = 87,
                  battery_mv: int = 3900, manufacturer: str = "RealPen",
                  model: str = "virtual pen (bumble)", mtu: int = PEN_MTU,
-                 protocol_version: int = protocol.PROTOCOL_VERSION):
+                 protocol_version: int = protocol.PROTOCOL_VERSION,
+                 rx_buffer: int | None = None):
         self.name = name
         self.address = address
         self.rate = rate
@@ -133,6 +151,10 @@ class VirtualPen:
         self.tx_log = bytearray()
         self.tx_pieces: list[int] = []
         self.rx_pieces: list[int] = []
+        self.rx_buffer = firmware_rx_buffer() if rx_buffer is None else rx_buffer
+        self.rx_dropped = 0
+        self._rx = bytearray()  # writes not yet read by the main loop
+        self._held = False  # the main loop is busy (hold_main_loop): RX is not read
         self.connections = 0
         self.errors: list[BaseException] = []
         self._lock = threading.Lock()  # the core is fed on the loop, inspected from tests
@@ -222,7 +244,7 @@ class VirtualPen:
         self._tx_queue = asyncio.Queue()
         loop = asyncio.get_running_loop()
         tasks = [loop.create_task(self._tx_pump(connection, self._tx_queue)),
-                 loop.create_task(self._render())]
+                 loop.create_task(self._render()), loop.create_task(self._main_loop())]
         self._tasks = tasks
 
         def on_disconnection(_reason: int) -> None:
@@ -236,14 +258,27 @@ class VirtualPen:
         connection.on(connection.EVENT_DISCONNECTION, on_disconnection)
 
     def _on_rx(self, _connection: Connection, value: bytes) -> None:
-        # A write command: the bytes are one piece of the host's frame stream (any split).
+        # A write command: one piece of the host's frame stream (any split), appended to the RX
+        # buffer as BTstack does in append mode: what does not fit is cut off, silently.
         self.rx_pieces.append(len(value))
-        try:
-            with self._lock:
-                self._pen_link.feed(bytes(value))
-        except Exception as error:
-            self.errors.append(error)
-            raise
+        room = self.rx_buffer - len(self._rx)
+        self._rx += value[:room]
+        self.rx_dropped += max(0, len(value) - room)
+
+    async def _main_loop(self) -> None:
+        # The firmware's main loop (ble_pico.BlePen.poll): read what RX holds, feed the core.
+        while True:
+            await asyncio.sleep(MAIN_LOOP_PERIOD_S)
+            if self._held or not self._rx:
+                continue
+            data = bytes(self._rx)
+            self._rx.clear()
+            try:
+                with self._lock:
+                    self._pen_link.feed(data)
+            except Exception as error:
+                self.errors.append(error)
+                raise
 
     def _send(self, frame: bytes) -> None:
         # The core's send function for this link: replies and EVENTs, whole frames.
@@ -306,6 +341,16 @@ class VirtualPen:
     def sent_frames(self) -> list:
         """Every frame the pen notified so far, decoded: ``[(ftype, seq, payload), ...]``."""
         return protocol.FrameDecoder().feed(bytes(self.tx_log))
+
+    @contextlib.contextmanager
+    def hold_main_loop(self):
+        """Keep the pen's main loop from reading RX while in the block (busy: a long frame, a
+        garbage collection), so that host writes pile up in the RX buffer."""
+        self._held = True
+        try:
+            yield
+        finally:
+            self._held = False
 
     def run_on_loop(self, coroutine_function: Callable[[], Any], timeout: float = 5.0) -> Any:
         """Run ``coroutine_function()`` on the pen's loop from another thread; return its result."""

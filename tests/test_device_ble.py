@@ -171,3 +171,51 @@ def test_backend_refuses_writes_longer_than_the_mtu():
                 await client.write_gatt_char(protocol.BLE_RX, bytes(21), response=False)
 
     asyncio.run(session())
+
+
+def _burst_upload(pen: VirtualPen) -> tuple[list, int]:
+    """Write a whole 1500-sample upload (BEGIN, 17 chunk frames, COMMIT: ~3.3 KB) to RX as write
+    commands while the pen's main loop is busy, then let it read; the pen's replies."""
+    samples = _pattern(1500, seed=3)
+    data = samples.astype("<i2").tobytes()
+    frames = [protocol.encode_frame(protocol.PATTERN_BEGIN, 1, protocol.pack_pattern_begin(
+        5, samples.size, 8000, protocol.FORMAT_S16LE, zlib.crc32(data)))]
+    frames += [protocol.encode_frame(protocol.PATTERN_CHUNK, 2, protocol.pack_pattern_chunk(
+        at, data[at:at + protocol.MAX_CHUNK])) for at in range(0, len(data), protocol.MAX_CHUNK)]
+    frames.append(protocol.encode_frame(protocol.PATTERN_COMMIT, 3,
+                                        protocol.pack_pattern_commit(5)))
+    stream = b"".join(frames)
+
+    async def session():
+        async with BleakClient(pen.name, backend=pen.client_backend(), timeout=3) as client:
+            received = bytearray()
+            await client.start_notify(protocol.BLE_TX, lambda _c, piece: received.extend(piece))
+            with pen.hold_main_loop():
+                for frame in frames:  # one frame a write: each fits the 244-byte MTU
+                    await client.write_gatt_char(protocol.BLE_RX, frame, response=False)
+                await asyncio.sleep(0.02)  # every write has reached the pen's RX buffer
+            for _ in range(60):  # the COMMIT's reply comes within milliseconds, if at all
+                replies = protocol.FrameDecoder().feed(bytes(received))
+                if any(seq == 3 for _, seq, _ in replies):
+                    break
+                await asyncio.sleep(0.005)
+            return replies
+
+    replies = asyncio.run(session())
+    return [(ftype, seq) for ftype, seq, _ in replies if ftype != protocol.EVENT], len(stream)
+
+
+def test_rx_buffer_holds_a_burst_that_a_1024_byte_buffer_would_cut():
+    """BTstack cuts RX writes that do not fit the buffer, silently. With the firmware's buffer
+    (ble_pico._RX_BUFFER) a 3.3 KB burst written while the main loop is busy arrives whole and
+    commits; with the 1024 bytes it had, the same burst loses its end and nothing commits."""
+    pen = VirtualPen("RealPen-rx")
+    assert pen.rx_buffer >= 4096
+    replies, sent = _burst_upload(pen)
+    assert sent > 3000 and pen.rx_dropped == 0 and pen.errors == []
+    assert replies == [(protocol.ACK, 1), (protocol.ACK, 3)]
+    assert pen.playing_pattern()[0] == 5 or _wait_for(lambda: pen.playing_pattern()[0] == 5)
+    small = VirtualPen("RealPen-rx-small", rx_buffer=1024)
+    replies, _ = _burst_upload(small)
+    assert small.rx_dropped == sent - 1024
+    assert (protocol.ACK, 3) not in replies and small.playing_pattern()[0] == -1

@@ -37,7 +37,8 @@ def sim(tmp_path_factory):
 
 def states(trace) -> list[tuple[int, int, int]]:
     """(playing, gain, rate) of each SET_STATE the pen took, from its trace."""
-    events = [json.loads(line) for line in trace.read_text().splitlines() if line.strip()]
+    lines = trace.read_text().split("\n")[:-1]  # whole lines: the pen may be writing one
+    events = [json.loads(line) for line in lines if line.strip()]
     return [(e["playing"], e["gain"], e["rate"]) for e in events if e["event"] == "set_state"]
 
 
@@ -66,7 +67,10 @@ def test_upload_play_stop(sim):
     assert "gain 0.5, rate 2" in played.stdout
     stopped = run_cli("device", "stop", "--port", sim.port)
     assert stopped.returncode == 0, stopped.stderr
-    time.sleep(0.1)  # the trace is written when the player applies the state
+    # The trace is written when the player applies the state, a block after the frame came.
+    deadline = time.monotonic() + 5.0
+    while len(states(sim.trace_path)) < before + 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
     assert states(sim.trace_path)[before:] == [(1, round(0.5 * p.GAIN_ONE), 2 * p.RATE_ONE),
                                                (0, 0, p.RATE_ONE)]
 

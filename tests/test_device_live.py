@@ -245,6 +245,26 @@ def test_a_refused_pattern_is_said_once_and_the_stroke_still_plays(fake):
     assert "CRC-32" in status["message"] and pen.of("upload") == []
 
 
+def test_after_a_failed_upload_the_pens_pattern_is_unknown_and_sent_again(fake):
+    # On the Pico a PATTERN_BEGIN drops a pattern committed but not yet swapped in: once an
+    # upload fails, the pen may play neither, so the next stroke with a pen uploads its pattern.
+    pen, bridge = fake
+    bridge.pen_down(ORIGIN, PENCIL, True)
+    bridge.pen_up(ORIGIN)
+    wait_for(lambda: len(pen.of("set_state")) == 2)
+    pen.refuse = True
+    bridge.pen_down(ORIGIN, BALLPOINT, True)
+    bridge.pen_up(ORIGIN)
+    wait_for(lambda: len(pen.of("set_state")) == 4)
+    assert "refused ballpoint's pattern" in bridge.status()["message"]
+    assert bridge.status()["pattern"] is None  # what the pen holds is not known
+    pen.refuse = False
+    bridge.pen_down(ORIGIN, PENCIL, True)
+    wait_for(lambda: len(pen.of("set_state")) == 5)
+    assert [call[1] for call in pen.of("upload")] == [tiny_pattern(PENCIL, 8000).tobytes()] * 2
+    assert bridge.status()["pattern"]["pen"] == "pencil"
+
+
 def test_a_pattern_the_pen_cannot_play_is_said_and_the_link_stays(fake):
     pen, bridge = fake
 

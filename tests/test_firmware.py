@@ -296,6 +296,111 @@ def test_the_pen_answers_every_refusal_with_its_code_and_keeps_the_last_good_pat
     assert token == 0xFFFFFFFF
 
 
+class CorePen:
+    """``rp_pen.Pen`` in this process with one link; :meth:`ask` returns the decoded frames it
+    sent back."""
+
+    def __init__(self, **settings):
+        from rp_pen import Pen
+
+        self.sent: list[bytes] = []
+        self.pen = Pen(**settings)
+        self.link = self.pen.add_link(self.sent.append, "test")
+
+    def ask(self, ftype, payload=b"", seq=9):
+        self.sent.clear()
+        self.link.feed(P.encode_frame(ftype, seq, payload))
+        return self.frames()
+
+    def frames(self):
+        return [(t, s, p) for frame in self.sent for t, s, p in P.FrameDecoder().feed(frame)]
+
+    def upload(self, pattern_id, samples):
+        data = np.asarray(samples, dtype="<i2").tobytes()
+        begin = P.pack_pattern_begin(pattern_id, len(samples), RATE, P.FORMAT_S16LE,
+                                     zlib.crc32(data))
+        assert self.ask(P.PATTERN_BEGIN, begin)[0][0] == P.ACK
+        assert self.ask(P.PATTERN_CHUNK, P.pack_pattern_chunk(0, data)) == []
+        return self.ask(P.PATTERN_COMMIT, P.pack_pattern_commit(pattern_id))
+
+
+def test_a_malformed_chunk_or_commit_ends_the_upload():
+    """docs/protocol.md: a chunk with a malformed payload abandons the upload, and a COMMIT
+    ends it even when its payload is malformed (the Due does the same, tests/test_due.py)."""
+    core = CorePen(max_pattern_bytes=400)
+    data = bytes(range(40))
+    begin = P.pack_pattern_begin(3, 20, RATE, P.FORMAT_S16LE, zlib.crc32(data))
+
+    def nack(ftype, code):
+        return [(P.NACK, 9, P.pack_nack(ftype, code))]
+
+    assert core.ask(P.PATTERN_BEGIN, begin)[0][0] == P.ACK
+    assert core.ask(P.PATTERN_CHUNK, P.pack_pattern_chunk(0, b"")) == nack(P.PATTERN_CHUNK,
+                                                                           P.E_BAD_LENGTH)
+    assert core.ask(P.PATTERN_CHUNK, P.pack_pattern_chunk(0, data)) == nack(P.PATTERN_CHUNK,
+                                                                            P.E_NO_UPLOAD)
+    assert core.ask(P.PATTERN_BEGIN, begin)[0][0] == P.ACK
+    assert core.ask(P.PATTERN_CHUNK, P.pack_pattern_chunk(0, data)) == []
+    commit = P.pack_pattern_commit(3)
+    assert core.ask(P.PATTERN_COMMIT, commit + b"\x00") == nack(P.PATTERN_COMMIT, P.E_BAD_LENGTH)
+    assert core.ask(P.PATTERN_COMMIT, commit) == nack(P.PATTERN_COMMIT, P.E_NO_UPLOAD)
+    assert not core.pen.player.pending and core.pen.player.pattern_id == -1
+
+
+def test_the_pong_clock_runs_on_across_ticks_us_wraps(monkeypatch):
+    """ticks_us wraps at 2**30 µs on the rp2 port and ticks_diff is right only for gaps under
+    2**29 µs (about 9 minutes): the pen's tick (every main-loop pass) keeps the PONG clock, so
+    a first PING after 20 minutes still reads 20 minutes."""
+    import rp_pen
+
+    period = 1 << 30
+    now = [period - 3_000_000]  # 3 s before a wrap
+    monkeypatch.setattr(rp_pen, "ticks_us", lambda: now[0] % period)
+    monkeypatch.setattr(rp_pen, "ticks_diff",
+                        lambda a, b: (a - b + period // 2) % period - period // 2)
+    core = CorePen()
+    for _ in range(20 * 6):  # the main loop ticks; here every 10 s of the fake clock
+        now[0] += 10_000_000
+        core.pen.tick()
+    [(ftype, _, payload)] = core.ask(P.PING, P.pack_ping(1))
+    assert ftype == P.PONG and P.unpack_pong(payload) == (1, 20 * 60 * 1_000_000)
+    for _ in range(4000):  # 11 hours on: PONG wraps at 2**32 µs, as documented
+        now[0] += 10_000_000
+        core.pen.tick()
+    assert P.unpack_pong(core.ask(P.PING, P.pack_ping(2))[0][2])[1] == (
+        (20 * 60 + 40000) * 1_000_000) % 2**32
+
+
+def test_every_swap_is_announced_so_a_host_knows_what_plays():
+    """EVENT pattern after each swap, with the id now playing; a BEGIN while a committed
+    pattern still waits for the wrap cancels that one (docs/protocol.md), and no EVENT ever
+    names it."""
+    from array import array
+
+    core = CorePen(max_pattern_bytes=400)
+    block = array("h", bytes(32))
+
+    def run(blocks):
+        core.sent.clear()
+        for _ in range(blocks):
+            core.pen.fill(block)
+            core.pen.tick()
+        return [P.unpack_event(p) for t, _, p in core.frames() if t == P.EVENT]
+
+    assert core.upload(1, [1000] * 50)[0][0] == P.ACK
+    assert run(1) == [(P.EV_PATTERN, 1)]  # idle: at once
+    core.ask(P.SET_STATE, P.pack_set_state(1, P.GAIN_ONE, P.RATE_ONE, 5))
+    run(1)
+    assert core.upload(2, [2000] * 60)[0][0] == P.ACK  # waits for pattern 1's wrap
+    assert core.pen.player.pending
+    assert core.ask(P.PATTERN_BEGIN, P.pack_pattern_begin(3, 70, RATE, P.FORMAT_S16LE, 0)) == [
+        (P.ACK, 9, P.pack_ack(P.PATTERN_BEGIN))]
+    assert not core.pen.player.pending  # pattern 2 is gone, pattern 1 plays on
+    assert run(4) == [] and core.pen.player.pattern_id == 1
+    assert core.upload(3, [3000] * 70)[0][0] == P.ACK
+    assert run(4) == [(P.EV_PATTERN, 3)] and core.pen.player.pattern_id == 3
+
+
 # -- the Unix port: no allocation, fuzzed frames ----------------------------------------------
 
 def run_micropython(script: Path, *args: str, timeout: float = 60) -> subprocess.CompletedProcess:
@@ -443,9 +548,37 @@ def test_ten_to_the_fifth_fuzzed_frames_never_crash_the_firmware_and_it_resyncs(
 # -- main.py and ble_pico.py under the Unix port, with fake hardware modules -------------------
 
 FAKES = {
+    "fake_micropython.py": """
+import micropython as _real
+
+const = _real.const
+schedule = _real.schedule
+LOG = []  # what the firmware did first: each kind of step once, in order
+
+def log(step):
+    if step not in LOG:
+        LOG.append(step)
+
+def kbd_intr(char):
+    log("kbd_intr %d" % char)
+    _real.kbd_intr(char)
+""",
+    "fake_gc.py": """
+import gc as _real
+from fake_micropython import log
+
+mem_alloc = _real.mem_alloc
+collections = 0
+
+def collect():
+    global collections
+    collections += 1
+    _real.collect()
+""",
     "fake_machine.py": """
 import micropython
 import bluetooth
+from fake_micropython import log
 
 class Pin:
     OUT = 1
@@ -460,58 +593,128 @@ class ADC:
         return 26000  # 1.31 V at the pin: 3.93 V on VSYS through the 3:1 divider
 
 class I2S:
+    # The rp2 driver's non-blocking TX path as its source has it (micropython
+    # ports/rp2/machine_i2s.c, extmod/machine_i2s.c): a DMA buffer of two 128-byte halves
+    # (machine_i2s.c:51-52); at each half's interrupt, write()'s buffer is copied into the ring
+    # (ibuf bytes holding ibuf - 1) only if all of it fits, at most 512 bytes (extmod
+    # machine_i2s.c:181-183, 322-339), and the callback is scheduled once it is all in; then
+    # the half that just went out is refilled from the ring if the ring holds a half's worth,
+    # else with silence (machine_i2s.c:210-239). A mono sample fills both channels, so a half
+    # takes 64 ring bytes in MONO and 128 in STEREO.
     TX = 0
     MONO = 0
     STEREO = 1
     writes = 0
+    irqs = 0
     peak = 0
-    stereo_ok = True
+    held = True  # every pattern sample went out twice in a row (the zero-order hold)
+    same = True  # STEREO writes: left == right
+    silent = 0  # halves the DMA played as silence after the first sound (underflows)
+    lag = 0  # most DMA halves from a write() to its first frame entering the PIO FIFO
     last = None
+    settings = None
     def __init__(self, ident, **settings):
-        self.settings = settings
+        log("i2s")
+        I2S.settings = settings
+        self.ibuf = settings["ibuf"]
+        self.mono = settings["format"] == I2S.MONO
+        self.ring = b""
+        self.pushed = 0  # bytes ever pushed into the ring
+        self.popped = 0
+        self.starts = []  # (ring offset of a block's first byte, irqs when it was written)
+        self.app = None
+        self.index = 0
+        self.written_at = 0
         self.callback = None
+        self.sounding = False
+        I2S.last = self
     def irq(self, callback):
         self.callback = callback
     def write(self, buf):
         I2S.writes += 1
-        for i in range(0, len(buf), 2):
-            if buf[i] != buf[i + 1]:
-                I2S.stereo_ok = False
-            if abs(buf[i]) > I2S.peak:
-                I2S.peak = abs(buf[i])
+        self.app = bytes(buf)
+        self.index = 0
+        self.written_at = I2S.irqs
         if I2S.writes == 600:
             bluetooth.central_writes()
-        I2S.last = self
+        if I2S.writes == 900:
+            bluetooth.central_drops_mid_frame()
+        return len(buf)
+    def interrupt(self):
+        I2S.irqs += 1
+        if self.app is not None:
+            n = min(512, len(self.app) - self.index)
+            if self.ibuf - len(self.ring) - 1 >= n:
+                if self.index == 0:
+                    self.starts.append((self.pushed, self.written_at))
+                self.ring += self.app[self.index:self.index + n]
+                self.pushed += n
+                self.index += n
+                if self.index >= len(self.app):
+                    self.app = None
+                    micropython.schedule(self.callback, self)
+        need = 64 if self.mono else 128
+        if len(self.ring) < need:
+            if self.sounding:
+                I2S.silent += 1
+            return
+        half = self.ring[:need]
+        self.ring = self.ring[need:]
+        while self.starts and self.starts[0][0] < self.popped + need:
+            # This half goes out after the one the DMA started at this interrupt.
+            I2S.lag = max(I2S.lag, I2S.irqs + 1 - self.starts.pop(0)[1])
+        self.popped += need
+        self.sounding = True
+        for i in range(0, need, 4):
+            a = half[i] | half[i + 1] << 8
+            b = half[i + 2] | half[i + 3] << 8
+            if self.mono and a != b:
+                I2S.held = False
+            if not self.mono and a != b:
+                I2S.same = False
+            a = a - 65536 if a & 0x8000 else a
+            if abs(a) > I2S.peak:
+                I2S.peak = abs(a)
 
     @staticmethod
     def tick():
-        # The driver asks for the next block: here every other main-loop poll, a pace that
-        # leaves the loop time to read the host's bytes, as the real 4 ms period does.
+        # A DMA half has gone out: here every other main-loop poll, a pace that leaves the loop
+        # time to read the host's bytes.
         I2S.ticks = getattr(I2S, "ticks", 0) + 1
         if I2S.ticks % 2 == 0 and I2S.last is not None and I2S.last.callback is not None:
-            micropython.schedule(I2S.last.callback, I2S.last)
+            I2S.last.interrupt()
 """,
-    "rp2.py": "def bootsel_button():\n    return 0\n",
+    "rp2.py": """
+from fake_micropython import log
+
+def bootsel_button():
+    log("bootsel")
+    return 0
+""",
     "fake_select.py": """
 import select as real
 import fake_machine
+from fake_micropython import log
 POLLIN = real.POLLIN
 
 class poll:
-    # The real poll, until the fake I2S has taken 1500 blocks: then the main loop ends (an
-    # exception in a scheduled callback would only be printed).
+    # The real poll, until the fake I2S has taken 1500 blocks (or played 8000 halves, should
+    # the driver never take a block): then the main loop ends (an exception in a scheduled
+    # callback would only be printed).
     def __init__(self):
         self.poller = real.poll()
     def register(self, stream, flags):
         self.poller.register(stream, flags)
     def poll(self, timeout):
-        if fake_machine.I2S.writes >= 1500:
+        log("usb")
+        if fake_machine.I2S.writes >= 1500 or fake_machine.I2S.irqs >= 8000:
             raise SystemExit
         fake_machine.I2S.tick()
         return self.poller.poll(0)  # the loop's 1 ms naps would only slow the test
 """,
     "bluetooth.py": """
 import rp_protocol as P
+from fake_micropython import log
 
 _ble = []
 
@@ -520,10 +723,14 @@ def UUID(value):
 
 class BLE:
     def __init__(self):
+        log("ble")
         self.values = {}
         self.notified = []
         self.adverts = 0
         self.handler = None
+        self.connected = set()
+        self.drop = None  # a connection to drop after its first notification
+        self.after_drop = 0  # notifications tried on a connection after it was gone
         _ble.append(self)
     def active(self, on):
         pass
@@ -532,7 +739,7 @@ class BLE:
     def gatts_register_services(self, services):
         return ((1, 2, 3), (4, 5, 6), (7,))
     def gatts_set_buffer(self, handle, size, append):
-        pass
+        self.rx_buffer = size
     def gatts_write(self, handle, value):
         self.values[handle] = bytes(value)
     def gatts_read(self, handle):
@@ -540,7 +747,14 @@ class BLE:
         self.values[handle] = b""
         return value
     def gatts_notify(self, connection, handle, data=None):
+        if connection not in self.connected:
+            self.after_drop += 1
+            raise OSError(107)  # ENOTCONN
         self.notified.append((connection, handle, bytes(data)))
+        if connection == self.drop:
+            # The host walks away mid-frame: the stack's event runs before the next piece.
+            self.connected.discard(connection)
+            self.handler(2, (connection, 0, b""))
     def gap_advertise(self, interval, adv_data=None, resp_data=None, connectable=True):
         self.adverts += 1
     def irq(self, handler):
@@ -548,11 +762,23 @@ class BLE:
 
 def central_writes():
     ble = _ble[0]
+    ble.connected.add(9)
     ble.handler(1, (9, 0, b""))  # a host connects
     ble.handler(21, (9, 40))  # and negotiates ATT MTU 40: notifications of 37 bytes
     ble.values[1] = P.encode_frame(P.PING, 5, P.pack_ping(0xB1E)) + P.encode_frame(
         P.HELLO, 6, P.pack_hello(1))
     ble.handler(3, (9, 1))  # it writes RX
+
+def central_drops_mid_frame():
+    ble = _ble[0]
+    ble.connected.discard(9)
+    ble.handler(2, (9, 0, b""))  # the first host leaves
+    ble.connected.add(12)
+    ble.handler(1, (12, 0, b""))  # another comes, at ATT MTU 23: the INFO reply in 2 pieces
+    ble.drop = 12  # and leaves after the first
+    ble.values[1] = P.encode_frame(P.HELLO, 7, P.pack_hello(1)) + P.encode_frame(
+        P.SET_STATE, 8, P.pack_set_state(0, 0, P.RATE_ONE, 5))  # and stops the pen
+    ble.handler(3, (12, 1))
 """,
 }
 
@@ -560,30 +786,44 @@ BOARD_SCRIPT = """
 import sys
 sys.path.insert(0, {fakes!r})
 sys.path.insert(1, {firmware!r})
+import fake_micropython
+sys.modules["micropython"] = fake_micropython
+import fake_gc
+sys.modules["gc"] = fake_gc
 import fake_machine
 import fake_select
 sys.modules["machine"] = fake_machine
 sys.modules["select"] = fake_select
 import config
-config.STARTUP_WINDOW_MS = 0  # no BOOTSEL wait
+config.STARTUP_WINDOW_MS = 20  # a short BOOTSEL window, polled twice
+config.GC_IDLE_BYTES = 1  # collect at every silent idle pass
 try:
     import main
 except SystemExit:
     pass
 import bluetooth
 ble = bluetooth._ble[0]
-stream = b"".join(data for conn, handle, data in ble.notified if handle == 2)
-sys.stderr.write("i2s %d %d %d\\n" % (fake_machine.I2S.writes, fake_machine.I2S.peak,
-                                       fake_machine.I2S.stereo_ok))
-sys.stderr.write("ble %d %d %s %s\\n" % (ble.adverts, max(len(d) for c, h, d in ble.notified),
-                                         stream.hex(), ble.values[3].hex()))
+I2S = fake_machine.I2S
+stream = b"".join(data for conn, handle, data in ble.notified if handle == 2 and conn == 9)
+second = [len(data) for conn, handle, data in ble.notified if handle == 2 and conn == 12]
+sys.stderr.write("log %s %d\\n" % (",".join(fake_micropython.LOG).replace(" ", "_"),
+                                    fake_gc.collections))
+sys.stderr.write("i2s %d %d %d %d %d %d %d %d %d %d\\n" % (
+    I2S.writes, I2S.peak, I2S.held, I2S.same, I2S.silent, I2S.lag, I2S.settings["rate"],
+    I2S.settings["format"] == I2S.MONO, I2S.settings["ibuf"], I2S.settings["bits"]))
+sys.stderr.write("ble %d %d %s %s %d %d %d\\n" % (
+    ble.adverts, max(len(d) for c, h, d in ble.notified), stream.hex(), ble.values[3].hex(),
+    ble.rx_buffer, len(second), ble.after_drop))
 """
+
+DMA_HALF_FRAMES = 32  # 128-byte halves of 16-bit stereo frames (ports/rp2/machine_i2s.c:51-52)
 
 
 def test_the_pico_entry_point_runs_over_fake_hardware(tmp_path):
     """main.py and ble_pico.py cannot meet a real Pico here; this runs them under the Unix port
-    with fake ``machine``, ``rp2`` and ``bluetooth`` modules, so at least their wiring (USB in,
-    I2S refills, GATT handles, BLE pieces) runs."""
+    with fake ``micropython`` (kbd_intr), ``machine``, ``rp2`` and ``bluetooth`` modules: Ctrl-C
+    off before anything else, the I2S queue as the rp2 driver's source would hold it, USB in,
+    GATT handles, BLE pieces, and a host leaving in the middle of a notified frame."""
     for name, text in FAKES.items():
         (tmp_path / name).write_text(text)
     script = tmp_path / "board.py"
@@ -599,22 +839,36 @@ def test_the_pico_entry_point_runs_over_fake_hardware(tmp_path):
     frames += [P.encode_frame(P.PATTERN_COMMIT, 4, P.pack_pattern_commit(3)),
                P.encode_frame(P.SET_STATE, 5, P.pack_set_state(1, P.GAIN_ONE, P.RATE_ONE, 5)),
                P.encode_frame(P.PING, 6, P.pack_ping(42))]
+    assert 0x03 in frames[0]  # the HELLO holds the byte Ctrl-C is (its COBS code after 0x00)
     process = subprocess.run([find_micropython(), str(script)], input=b"".join(frames),
                              capture_output=True, timeout=60, cwd=tmp_path)
     report = process.stderr.decode()
     assert process.returncode == 0, report + process.stdout.decode(errors="replace")
-    i2s = next(line for line in report.splitlines() if line.startswith("i2s")).split()
-    assert int(i2s[1]) >= 1500 and int(i2s[2]) > 15000 and i2s[3] == "1"  # played, L == R
+    lines = {line.split()[0]: line.split()[1:] for line in report.splitlines() if line.strip()}
+    steps = lines["log"][0].split(",")
+    assert int(lines["log"][1]) >= 2  # once at start, then while silent and idle (the stop)
+    # Ctrl-C off first of all: before the BOOTSEL window, the I2S and BLE set-up, any USB read.
+    assert steps[0] == "kbd_intr_-1" and {"bootsel", "i2s", "ble", "usb"} <= set(steps[1:])
+    writes, peak, held, same, silent, lag, rate, mono, ibuf, bits = map(int, lines["i2s"])
+    assert writes >= 1500 and peak > 15000 and silent == 0  # it played, never ran dry
+    assert (rate, mono, held, same, bits) == (2 * RATE, 1, 1, 1, 16)  # each sample twice
+    # Queued ahead of the PIO: a block waits at most `lag` halves for the bus once written,
+    # and a SET_STATE at most one half more for the block it goes into.
+    half_ms = DMA_HALF_FRAMES * 1000 / rate
+    assert lag == 2 and (lag + 1) * half_ms <= 8, (lag, half_ms, ibuf)
     usb = {(t, s): p for t, s, p in P.FrameDecoder().feed(process.stdout)}
     info = P.unpack_info(usb[(P.INFO, 1)])
-    assert info[6] == P.FEATURE_USB | P.FEATURE_BLE | P.FEATURE_RATE
+    assert info[4] == RATE and info[6] == P.FEATURE_USB | P.FEATURE_BLE | P.FEATURE_RATE
     assert usb[(P.ACK, 4)] == P.pack_ack(P.PATTERN_COMMIT)
     assert P.unpack_pong(usb[(P.PONG, 6)])[0] == 42
-    ble = next(line for line in report.splitlines() if line.startswith("ble")).split()
-    assert int(ble[1]) >= 1 and int(ble[2]) <= 37  # advertised; pieces fit the MTU
-    over_ble = {(t, s): p for t, s, p in P.FrameDecoder().feed(bytes.fromhex(ble[3]))}
+    adverts, longest, stream, characteristic, rx_buffer, pieces, after_drop = lines["ble"]
+    assert int(adverts) >= 3 and int(longest) <= 37  # advertised again after each host; pieces fit
+    over_ble = {(t, s): p for t, s, p in P.FrameDecoder().feed(bytes.fromhex(stream))}
     assert P.unpack_pong(over_ble[(P.PONG, 5)])[0] == 0xB1E
-    assert over_ble[(P.INFO, 6)] == bytes.fromhex(ble[4]) == usb[(P.INFO, 1)]
+    assert over_ble[(P.INFO, 6)] == bytes.fromhex(characteristic) == usb[(P.INFO, 1)]
+    assert int(rx_buffer) >= 4096  # 16 chunk frames (~3 KB) written before the pen reads them
+    # The host that left mid-frame got the first piece and was not notified again.
+    assert int(pieces) == 1 and int(after_drop) == 0
 
 
 # -- end to end: host → pseudo-terminal → firmware ----------------------------------------------
@@ -627,22 +881,30 @@ class Host:
         self.decoder = P.FrameDecoder()
         self.seq = 0
         self.events = []
+        self.replies: dict[int, list[tuple[int, bytes]]] = {}  # seq → replies not yet taken
 
     def send(self, ftype: int, payload: bytes = b"") -> int:
         self.seq = (self.seq + 1) & 0xFF
         os.write(self.fd, P.encode_frame(ftype, self.seq, payload))
         return self.seq
 
+    def read(self, timeout: float) -> None:
+        """Take every frame of one read: EVENTs to ``events``, replies stashed by seq."""
+        if select.select([self.fd], [], [], timeout)[0]:
+            for ftype, rseq, payload in self.decoder.feed(os.read(self.fd, 4096)):
+                if ftype == P.EVENT:
+                    self.events.append(P.unpack_event(payload))
+                else:
+                    self.replies.setdefault(rseq, []).append((ftype, payload))
+
     def reply(self, seq: int, timeout: float = 3.0):
+        """The first reply to ``seq`` not taken yet: (type, payload)."""
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if select.select([self.fd], [], [], 0.05)[0]:
-                for ftype, rseq, payload in self.decoder.feed(os.read(self.fd, 4096)):
-                    if ftype == P.EVENT:
-                        self.events.append(P.unpack_event(payload))
-                    elif rseq == seq:
-                        return ftype, payload
-        raise AssertionError(f"no reply to seq {seq}")
+        while not self.replies.get(seq):
+            if time.monotonic() > deadline:
+                raise AssertionError(f"no reply to seq {seq}")
+            self.read(0.05)
+        return self.replies[seq].pop(0)
 
     def upload(self, samples: np.ndarray, pattern_id: int, crc: int | None = None):
         data = samples.astype("<i2").tobytes()
@@ -703,6 +965,10 @@ def test_end_to_end_upload_play_gain_stop_and_a_corrupted_upload_keeps_the_old_p
             time.sleep(0.1)
             kind, payload = host.reply(host.send(P.PING, P.pack_ping(99)))
             assert kind == P.PONG and P.unpack_pong(payload)[0] == 99
+            deadline = time.monotonic() + 2  # the underrun EVENT, if it is not in yet
+            while (not any(kind == P.EV_UNDERRUN for kind, _ in host.events)
+                   and time.monotonic() < deadline):
+                host.read(0.05)
         finally:
             host.close()
         events = pen.events()
@@ -717,7 +983,7 @@ def test_end_to_end_upload_play_gain_stop_and_a_corrupted_upload_keeps_the_old_p
     states = [e for e in events if e["event"] == "set_state"]
     assert [(e["playing"], e["gain"]) for e in states] == [(1, 65535), (1, 20000), (0, 20000)]
     want = reconstruct(events, len(played), {7: pattern.tolist()})
-    assert np.abs(played.astype(np.int64) - want).max() <= 1
+    assert np.array_equal(played.astype(np.int64), want), "the recording is not the specification"
     # The old pattern kept playing through the refused upload (at gain 20000).
     after = states[1]["sample"] + 240
     assert np.abs(played[after:states[2]["sample"]]).max() > 5000

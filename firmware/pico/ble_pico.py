@@ -27,7 +27,13 @@ _FLAG_WRITE_NO_RESPONSE = const(0x0004)
 _FLAG_NOTIFY = const(0x0010)
 
 _ADV_INTERVAL_US = const(100000)  # 100 ms: found quickly, little power
-_RX_BUFFER = const(1024)  # bytes of host writes held until the main loop reads them
+# Bytes of host writes held until the main loop reads them. In append mode BTstack copies each
+# write after what is there and silently cuts what does not fit (micropython
+# extmod/btstack/modbluetooth_btstack.c:943-948): a host that sent 16 chunk frames (~3 KB)
+# before waiting lost the end of them with 1024. 4096 holds more than RealPen's host ever has
+# in flight (it waits for a PONG after at most 4 chunks over BLE, docs/protocol.md), with room
+# for a main loop held up meanwhile (an upload's COMMIT, a garbage collection).
+_RX_BUFFER = const(4096)
 _DEFAULT_PIECE = const(20)  # ATT MTU 23 − 3, until the host negotiates a larger MTU
 _PREFERRED_MTU = const(247)  # a whole pattern chunk frame in one write (docs/protocol.md)
 
@@ -120,15 +126,19 @@ class BlePen:
                                                         self._level_at) >= 60000:
             self._level_at = time.ticks_ms()
             self.ble.gatts_write(self.level, bytes((self._percent(),)))
-            for connection in self.pieces:
+            for connection in list(self.pieces):  # a copy, as in _send
                 self._notify(connection, self.level, None)
 
     def _percent(self):
         return self.battery.percent() if self.battery is not None else 100
 
     def _send(self, data):
-        for connection, size in self.pieces.items():
+        # Over a copy: _irq (a connect, a disconnect, an MTU exchange) may change self.pieces
+        # while a notification waits, and a dict changed during iteration raises.
+        for connection, size in list(self.pieces.items()):
             for at in range(0, len(data), size):
+                if connection not in self.pieces:
+                    break  # the host left meanwhile: the rest of the frame is for nobody
                 self._notify(connection, self.tx, data[at:at + size])
 
     def _notify(self, connection, handle, piece):

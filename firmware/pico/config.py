@@ -16,22 +16,30 @@ MAX_PATTERN_BYTES = 32768  # the largest pattern (two buffers of it are allocate
 # and a 5 V supply, full scale is several volts RMS, more than most LRAs are rated for.
 GAIN_CAP = 32767
 
-BLOCK_SAMPLES = 32  # samples rendered per audio interrupt: 4 ms at 8 kHz
+# Pattern samples per block in the simulator (sim_main.py): 2 ms at 8 kHz, the blocks the Pico
+# renders too (main.py derives its own from the I2S driver: one DMA half, 32 frames at twice
+# SAMPLE_RATE, each pattern sample sent twice).
+BLOCK_SAMPLES = 16
 
 # I2S to the MAX98357A (machine.I2S; on the rp2 port WS must be the pin after SCK).
 I2S_ID = 0
 I2S_SCK_PIN = 16  # MAX98357A BCLK
 I2S_WS_PIN = 17  # MAX98357A LRC
 I2S_SD_PIN = 18  # MAX98357A DIN
-# machine.I2S ring buffer, bytes. The samples go out as 16-bit stereo (4 bytes a frame), and
-# the rp2 driver moves 128-byte halves of its DMA buffer (4 ms at 8 kHz) out of this ring, so
-# 128 is the least that works and keeps the queue short (README.md, "Audio buffering").
+# machine.I2S ring buffer, bytes. A block is written as 32 mono 16-bit samples (64 bytes); the
+# driver copies a write into the ring only when all of it fits, and a ring of n bytes holds
+# n - 1 (micropython extmod/machine_i2s.c:181-183, 326-328). 128 holds one block and never two:
+# the least queue (README.md, "Audio buffering on the Pico"). Do not go below 65.
 I2S_IBUF = 128
 AMP_SD_PIN = None  # GPIO wired to the MAX98357A SD pin, driven high at boot; None if tied high
 
 # BOOTSEL held during this long after a reset keeps the firmware from starting, so that the
 # REPL (and mpremote) can reach the board: the firmware turns Ctrl-C off on the USB port.
 STARTUP_WINDOW_MS = 1500
+
+# While the pen is silent and no byte came, collect the garbage once this many bytes were
+# allocated since the last collection (main.py), so that collections fall between strokes.
+GC_IDLE_BYTES = 8192
 
 BLE = True  # advertise and serve the RealPen BLE service (needs a Pico W / Pico 2 W)
 

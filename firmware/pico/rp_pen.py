@@ -114,8 +114,13 @@ class Pen:
         self._errors_at = now
         self._underrun_at = now
         self._battery_at = now
+        # The PONG clock: whole seconds and the µs within the second, advanced by ticks_diff at
+        # every tick() (ticks_us wraps at 2**30 µs on the rp2 port, and ticks_diff is only
+        # right for gaps under half that, 537 s), kept in two small ints so that advancing it
+        # allocates nothing on a 32-bit port.
         self._us_last = ticks_us()
-        self._us = 0
+        self._clock_s = 0
+        self._clock_us = 0
 
     # -- links ------------------------------------------------------------------------------
 
@@ -142,12 +147,21 @@ class Pen:
         for link in self.links:
             self._send(link, frame)
 
-    def clock_us(self):
-        """The pen's microsecond clock since start (PONG sends it modulo 2**32)."""
+    def _advance_clock(self):
+        # Called from tick() (every main-loop pass) and at each PING, so consecutive readings
+        # of ticks_us are never half a ticks period (2**29 µs, about 9 minutes) apart.
         now = ticks_us()
-        self._us += ticks_diff(now, self._us_last)
+        us = self._clock_us + ticks_diff(now, self._us_last)
         self._us_last = now
-        return self._us
+        while us >= 1000000:
+            us -= 1000000
+            self._clock_s += 1
+        self._clock_us = us
+
+    def clock_us(self):
+        """The pen's clock since start, in µs, modulo 2**32 (what PONG carries)."""
+        self._advance_clock()
+        return (self._clock_s * 1000000 + self._clock_us) & 0xFFFFFFFF
 
     @staticmethod
     def _send(link, frame):
@@ -189,8 +203,9 @@ class Pen:
                 return
         except ValueError:
             self._nack(link, ftype, seq, P.E_BAD_LENGTH)
-            if ftype == P.PATTERN_CHUNK:
-                self._upload = None  # a chunk lost is an upload lost
+            if ftype == P.PATTERN_CHUNK or ftype == P.PATTERN_COMMIT:
+                # A chunk lost is an upload lost, and a COMMIT always ends the upload.
+                self._upload = None
             return
         if ftype == P.SET_STATE:
             self._set_state(link, seq, fields)
@@ -313,7 +328,9 @@ class Pen:
 
     def tick(self):
         """Send the EVENTs that are due: pattern swapped in, underruns, decode errors (when
-        their count grew, at most once a second), battery (once a minute). Call often."""
+        their count grew, at most once a second), battery (once a minute). Call often (at
+        least every few minutes: it also keeps the PONG clock across ``ticks_us`` wraps)."""
+        self._advance_clock()
         player = self.player
         if player.swaps != self._swaps_seen:
             self._swaps_seen = player.swaps

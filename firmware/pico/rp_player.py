@@ -23,9 +23,11 @@ The position is kept as an integer index and a 16-bit fraction rather than one Q
 same value, so that no intermediate exceeds a MicroPython small int on a 32-bit port (2**30):
 ``pattern_length << 16`` would be 2**30 for a 32 KB pattern. Interpolation is
 ``p = p0 + ((p1 - p0) * (frac >> 2)) >> 14`` for the same reason ((p1 - p0) * frac would need
-33 bits); with ``frac == 0`` it is ``p0`` exactly, so at rate 4096 the pattern's own samples
-come out unchanged. Ramps are stepped with a quotient and remainder instead of multiplying
-``(target - amp_0) * k`` (which can exceed 2**30 for long fades); the values are identical.
+33 bits); with ``frac == 0`` it is ``p0`` exactly. The fraction is 0 from a stroke's start
+until a rate other than 4096 takes effect (and keeps its value after that until the next stop),
+so a stroke at rate 4096 throughout plays the pattern's own samples unchanged. Ramps are
+stepped with a quotient and remainder instead of multiplying ``(target - amp_0) * k`` (which
+can exceed 2**30 for long fades); the values are identical.
 
 :meth:`Player.fill` allocates nothing: the two pattern buffers (the one playing and the one an
 upload writes into) are allocated once, a commit only swaps them, and the state a host sets is

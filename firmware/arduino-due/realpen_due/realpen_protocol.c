@@ -528,6 +528,7 @@ static void handle_chunk(rp_pen *pen, const rp_frame *f) {
     const uint8_t *data;
     size_t n;
     if (rp_unpack_chunk(f->payload, f->length, &offset, &data, &n) != 0) {
+        pen->uploading = 0; /* a chunk lost is an upload lost (docs/protocol.md) */
         nack(pen, f, RP_E_BAD_LENGTH);
     } else if (!pen->uploading) {
         nack(pen, f, RP_E_NO_UPLOAD);
@@ -549,6 +550,7 @@ static void handle_chunk(rp_pen *pen, const rp_frame *f) {
 static void handle_commit(rp_pen *pen, const rp_frame *f) {
     uint16_t id;
     if (rp_unpack_commit(f->payload, f->length, &id) != 0) {
+        pen->uploading = 0; /* a COMMIT ends the upload, even a malformed one */
         nack(pen, f, RP_E_BAD_LENGTH);
     } else if (!pen->uploading || id != pen->upload.id) {
         pen->uploading = 0; /* a COMMIT ends the upload, whatever its outcome */

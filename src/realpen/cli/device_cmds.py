@@ -7,6 +7,7 @@ numpy and the simulated pen (:mod:`realpen.device`) are imported inside the comm
 from __future__ import annotations
 
 import contextlib
+import signal
 import statistics
 import time
 from collections.abc import Iterator
@@ -329,6 +330,9 @@ def sim(
     pen = SimPen(record=record, trace=trace)
     port = None
     interrupted = False
+    # A shell starts a background job (`realpen device sim &`) with SIGINT ignored; a script
+    # that stops it with SIGINT must still get the recording.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         with terminate_as_interrupt():
             try:

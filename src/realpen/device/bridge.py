@@ -486,6 +486,12 @@ class PenBridge:
             return
         if content == self._held or content in self._refused:
             return
+        # Until this upload is committed, what the pen will play is unknown: a PATTERN_BEGIN
+        # drops a pattern committed but not yet swapped in (the Pico's), and a failed upload
+        # may leave either. Forgetting it makes the next pen-down upload again.
+        self._held = None
+        with self._cond:
+            self._pattern_status = None
         try:
             pattern_id = self._client.upload(samples, self._rate)
         except _disconnect_errors():

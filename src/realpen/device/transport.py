@@ -29,7 +29,8 @@ from realpen.errors import RealPenError
 
 __all__ = ["DeviceError", "DeviceDisconnected", "Transport", "SerialTransport", "BleTransport",
            "open_transport", "BLE_PREFIX", "BAUD_RATE", "SerialPortInfo", "BlePenInfo",
-           "list_serial_ports", "scan_ble", "BluetoothUnavailable"]
+           "list_serial_ports", "scan_ble", "BluetoothUnavailable", "WRITE_TIMEOUT_S",
+           "UPLOAD_WINDOW", "BLE_UPLOAD_WINDOW"]
 
 BLE_PREFIX = "ble:"
 BAUD_RATE = 115200  # USB CDC ignores it; a UART bridge (or the Due's programming port) needs it
@@ -37,6 +38,10 @@ _POLL_S = 0.02  # how long one serial read waits at most: the reader thread's re
 _ADDRESS = re.compile(r"^([0-9A-Fa-f]{2}[:-]){5}[0-9A-Fa-f]{2}$|^[0-9A-Fa-f]{8}-([0-9A-Fa-f]{4}-){3}"
                       r"[0-9A-Fa-f]{12}$")  # a MAC address, or the UUID macOS gives a device
 DEFAULT_BLE_WRITE = 20  # bytes a write may carry before the MTU is known (23 − 3)
+WRITE_TIMEOUT_S = 2.0  # a serial write the pen does not take within this long: it stopped reading
+UPLOAD_WINDOW = 16  # pattern chunks an upload may send before waiting for the pen (≈ 2.9 KB)
+BLE_UPLOAD_WINDOW = 4  # over Bluetooth: the pen's receive buffer is small (4 KB on the Pico W)
+# and it decodes slowly, and writes without response have no flow control to hold the host back
 
 
 class DeviceError(RealPenError):
@@ -57,6 +62,9 @@ class Transport:
     :meth:`close`; ``name`` is the port as the user gave it (for messages)."""
 
     name: str = ""
+    #: How many pattern chunks (each a frame of up to 190 bytes) an upload sends before it waits
+    #: for the pen to have handled them (a PING round trip): what the link lets run ahead.
+    upload_window: int = UPLOAD_WINDOW
 
     def write(self, data: bytes) -> None:
         """Send ``data`` (blocks until it is handed to the link).
@@ -117,22 +125,25 @@ class SerialTransport(Transport):
 
     Args:
         port: the device (``/dev/ttyACM0``, ``COM3``, ``/dev/pts/5``).
+        write_timeout: seconds a write may wait for the pen to take the bytes; longer, and the
+            pen is taken to have stopped reading (a hung firmware, a port nobody serves).
 
     Raises:
         DeviceError: the port does not exist, is busy, or is not a serial device.
     """
 
-    def __init__(self, port: str):
+    def __init__(self, port: str, *, write_timeout: float = WRITE_TIMEOUT_S):
         import serial
 
         self.name = str(port)
+        self._write_timeout = float(write_timeout)
         try:
             # exclusive (POSIX: flock): a second host on the same port would take half of
             # the pen's bytes each; it is told the port is busy instead.
             options = {"exclusive": True} if os.name == "posix" else {}
             self._serial = serial.Serial(self.name, BAUD_RATE, bytesize=8, parity="N", stopbits=1,
-                                         timeout=_POLL_S, write_timeout=None, xonxoff=False,
-                                         rtscts=False, dsrdtr=False, **options)
+                                         timeout=_POLL_S, write_timeout=self._write_timeout,
+                                         xonxoff=False, rtscts=False, dsrdtr=False, **options)
         except (serial.SerialException, OSError, ValueError) as error:
             raise DeviceError(f"{self.name}: cannot open this serial port ({_why(error)})") \
                 from None
@@ -144,9 +155,22 @@ class SerialTransport(Transport):
         if self._closed:
             raise DeviceDisconnected(f"{self.name}: the port is closed")
         try:
+            # A bounded wait: a pen that stops reading would otherwise block this write, and
+            # every writer queued behind it, for ever.
             self._serial.write(bytes(data))
-        except (serial.SerialException, OSError) as error:
+        except serial.SerialTimeoutException:
+            if self._closed:
+                raise DeviceDisconnected(f"{self.name}: the port is closed") from None
+            raise DeviceDisconnected(f"{self.name}: the pen stopped reading (a write waited "
+                                     f"{self._write_timeout:g} s for it)") from None
+        except (serial.SerialException, OSError, TypeError, AttributeError, ValueError) as error:
+            # TypeError/AttributeError/ValueError: pyserial's write on a port closed by another
+            # thread.
+            if self._closed:
+                raise DeviceDisconnected(f"{self.name}: the port is closed") from None
             raise DeviceDisconnected(f"{self.name}: the pen went away ({_why(error)})") from None
+        if self._closed:  # close() woke a blocked write before all of it went out
+            raise DeviceDisconnected(f"{self.name}: the port is closed")
 
     def read(self, timeout: float) -> bytes:
         import serial
@@ -174,6 +198,12 @@ class SerialTransport(Transport):
             return
         self._closed = True
         try:
+            # Wake a write blocked on a pen that stopped reading (pyserial's abort pipe), so
+            # it returns instead of waiting out its timeout on a closed port.
+            self._serial.cancel_write()
+        except Exception:  # not offered on this platform, or the port vanished
+            pass
+        try:
             self._serial.close()
         except Exception:  # closing a port that vanished: nothing left to release
             pass
@@ -195,6 +225,10 @@ def _why(error: BaseException) -> str:
     """The system's reason in an OS or pyserial error, in a few words, without pyserial's
     repetition of the port's name."""
     text = " ".join(str(error).split())
+    if "readiness to read but returned no data" in text:
+        # pyserial's guess "(device disconnected or multiple access on port?)": the port is
+        # held exclusively, so it is the former.
+        return "disconnected"
     code = getattr(error, "errno", None)
     # pyserial wraps the OS error in its text: "[Errno 2] ...", or "(25, 'Inappropriate ...')".
     found = re.search(r"\[Errno (\d+)\] ([^:'\]]+)", text) or \
@@ -319,7 +353,7 @@ class BleTransport(Transport):
         self._closed = False
         self._lost = ""
         self._client = None
-        self._write_size = DEFAULT_BLE_WRITE
+        self._rx = None  # the BLE_RX characteristic, once connected
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name=f"realpen {self.name}",
                                         daemon=True)
@@ -375,12 +409,11 @@ class BleTransport(Transport):
                 from None
         self._client = client
         try:
-            if client.services.get_characteristic(BLE_RX) is None or \
-                    client.services.get_characteristic(BLE_TX) is None:
+            rx = client.services.get_characteristic(BLE_RX)
+            if rx is None or client.services.get_characteristic(BLE_TX) is None:
                 raise DeviceError(f"{self.name}: this device does not offer RealPen's service "
                                   f"({BLE_SERVICE})")
-            mtu = int(getattr(client, "mtu_size", 23) or 23)
-            self._write_size = max(DEFAULT_BLE_WRITE, mtu - 3)
+            self._rx = rx
             await client.start_notify(BLE_TX, self._on_notify)
         except DeviceError:
             await _quietly(client.disconnect())
@@ -406,10 +439,20 @@ class BleTransport(Transport):
 
     # -- the pipe --
 
+    upload_window = BLE_UPLOAD_WINDOW  # the Pico W's receive buffer: 4 KB, decoded slowly
+
     @property
     def write_size(self) -> int:
-        """The largest piece one Bluetooth write carries (ATT MTU − 3), in bytes."""
-        return self._write_size
+        """The largest piece one Bluetooth write carries (ATT MTU − 3), in bytes.
+
+        Asked of the RX characteristic at each write: bleak's ``mtu_size`` says 23 on BlueZ
+        (with a warning) unless the MTU is fetched separately, and a stack may learn the
+        negotiated MTU only after connecting. 20 (the minimum MTU's) when it cannot say."""
+        try:
+            size = int(self._rx.max_write_without_response_size)
+        except (AttributeError, TypeError, ValueError):  # not connected, or an older backend
+            return DEFAULT_BLE_WRITE
+        return max(DEFAULT_BLE_WRITE, size)
 
     def write(self, data: bytes) -> None:
         from realpen.device.protocol import BLE_RX
@@ -417,11 +460,12 @@ class BleTransport(Transport):
         if self._closed or not self._connected:
             raise DeviceDisconnected(f"{self.name}: {self._lost or 'not connected'}")
         data = bytes(data)
-        client = self._client
-        for start in range(0, len(data), self._write_size):
-            piece = data[start:start + self._write_size]
+        client, step = self._client, self.write_size
+        target = self._rx if self._rx is not None else BLE_RX
+        for start in range(0, len(data), step):
+            piece = data[start:start + step]
             try:
-                self._call(client.write_gatt_char(BLE_RX, piece, response=False), 10.0)
+                self._call(client.write_gatt_char(target, piece, response=False), 10.0)
             except DeviceError:
                 raise
             except _bluetooth_errors() as error:
