@@ -30,6 +30,7 @@ from __future__ import annotations
 import base64
 import functools
 import json
+import os
 import random
 import sys
 import time
@@ -225,6 +226,9 @@ def test_codec_passes_the_vectors_in_the_browser(browser, server):
 # Replaces navigator.serial before the page's scripts run. The one port's streams call the
 # functions the test exposes: __penOpen(baud) → bool, __penRead() → base64 of the bytes waiting
 # ('' when none, null when the port is gone), __penWrite(base64), __penClose().
+# window.__penGlitch() is a recoverable read error (a buffer overrun): the port's readable
+# stream errors and, as Web Serial's does, the port hands out a new one; bytes already read go
+# to the new stream.
 FAKE_SERIAL = """(() => {
   const fromB64 = (text) => Uint8Array.from(atob(text), (c) => c.charCodeAt(0));
   const toB64 = (bytes) => btoa(Array.from(bytes, (b) => String.fromCharCode(b)).join(''));
@@ -236,20 +240,41 @@ FAKE_SERIAL = """(() => {
         throw new DOMException('Failed to open serial port.', 'NetworkError');
       }
       const port = this;
-      this.readable = new ReadableStream({
-        async pull(controller) {
-          for (;;) {
-            const data = await window.__penRead();
-            if (data === null) {
-              port.readable = null;
-              controller.error(new DOMException('The device has been lost.', 'NetworkError'));
-              return;
+      const carry = [];
+      let source = null;
+      const readable = () => {
+        const mine = {
+          live: true,
+          start(controller) { mine.controller = controller; },
+          async pull(controller) {
+            if (carry.length) { controller.enqueue(carry.shift()); return; }
+            while (mine.live) {
+              const data = await window.__penRead();
+              if (data === null) {
+                if (!mine.live) return;
+                port.readable = null;
+                controller.error(new DOMException('The device has been lost.', 'NetworkError'));
+                return;
+              }
+              if (data.length) {
+                if (mine.live) controller.enqueue(fromB64(data)); else carry.push(fromB64(data));
+                return;
+              }
+              await new Promise((resolve) => setTimeout(resolve, 3));
             }
-            if (data.length) { controller.enqueue(fromB64(data)); return; }
-            await new Promise((resolve) => setTimeout(resolve, 3));
-          }
-        },
-      });
+          },
+          cancel() { mine.live = false; },
+        };
+        source = mine;
+        return new ReadableStream(mine);
+      };
+      this.readable = readable();
+      window.__penGlitch = () => {
+        const old = source;
+        old.live = false;
+        port.readable = readable();
+        old.controller.error(new DOMException('Buffer overrun', 'BufferOverrunError'));
+      };
       // A write resolves once queued, as a real port's does; the queue goes to the pty in
       // one call per task (one bridge call per chunk would make the upload crawl).
       let queued = [];
@@ -268,7 +293,11 @@ FAKE_SERIAL = """(() => {
         close() { return flushing; },
       });
     }
-    async close() { this.readable = null; this.writable = null; await window.__penClose(); }
+    async close() {
+      this.readable = null;
+      this.writable = null;
+      await window.__penClose();
+    }
   }
   const port = new FakePort();
   const serial = new EventTarget();
@@ -279,12 +308,19 @@ FAKE_SERIAL = """(() => {
 
 
 class SerialBridge:
-    """The fake port's other end: the SimPen's pseudo-terminal through pyserial."""
+    """The fake port's other end: the SimPen's pseudo-terminal through pyserial.
+
+    ``frozen``: a hung pen (nothing read, nothing written) until the page closes the port.
+    ``opened``: where in ``written`` each opening of the port began."""
 
     def __init__(self):
         self.sim = None
         self.port = None
+        self.baud = None
+        self.frozen = False
+        self.early = b""  # what the pen said before the port's far end was opened again
         self.written = bytearray()
+        self.opened: list[int] = []
 
     def expose(self, page):
         page.expose_function("__penOpen", self.open)
@@ -294,17 +330,40 @@ class SerialBridge:
 
     def open(self, baud):
         serial = pytest.importorskip("serial")
+        self.baud = baud
         self.port = serial.Serial(self.sim.port, baud, timeout=0)
+        self.opened.append(len(self.written))
         return True
 
-    def read(self):
+    def reopen(self):
+        """The pen restarted behind a port that stayed (a USB-serial adapter): the port's far
+        end follows the SimPen to its new pseudo-terminal; the page sees no change. What the
+        pen said at boot (its boot EVENT) is read first: pyserial's open flushes the input."""
+        import select
+
+        self.port.close()
+        fd = os.open(self.sim.port, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
         try:
-            data = self.port.read(4096) if self.port else None
+            if select.select([fd], [], [], 2.0)[0]:
+                self.early = os.read(fd, 4096)
+        finally:
+            os.close(fd)
+        self.port = pytest.importorskip("serial").Serial(self.sim.port, self.baud, timeout=0)
+
+    def read(self):
+        if self.port is None:
+            return None
+        if self.frozen:
+            return ""
+        try:
+            data, self.early = self.early + self.port.read(4096), b""
         except OSError:  # SerialException too: the firmware is gone and the pty with it
-            data = None
-        return None if data is None else base64.b64encode(data).decode()
+            return None
+        return base64.b64encode(data).decode()
 
     def write(self, text):
+        if self.frozen:
+            return
         data = base64.b64decode(text)
         self.written += data
         try:
@@ -314,6 +373,7 @@ class SerialBridge:
             pass
 
     def close(self):
+        self.frozen = False  # letting go of a hung pen's port resets it (a watchdog would)
         if self.port:
             self.port.close()
             self.port = None
@@ -339,6 +399,23 @@ def pen_stroke(page, n=12, x0=300.0, y0=300.0, pressure=0.6):
     cdp.detach()
 
 
+def until(page, check, timeout=8.0):
+    """Wait until ``check()``; the page (and the bridge's calls) run while Playwright waits."""
+    deadline = time.monotonic() + timeout
+    while not check():
+        assert time.monotonic() < deadline, f"timed out: {page.evaluate('window.realpen.penDevice')}"
+        page.wait_for_timeout(10)
+
+
+def longest_chunk_run(frames) -> int:
+    """The most PATTERN_CHUNKs in a row: how far an upload ran ahead of the pen's PONG."""
+    longest = run = 0
+    for ftype, _, _ in frames:
+        run = run + 1 if ftype == P.PATTERN_CHUNK else 0
+        longest = max(longest, run)
+    return longest
+
+
 def trace_events(path: Path) -> list[dict]:
     """The firmware's trace so far (a last line still being written is left for later)."""
     events = []
@@ -351,8 +428,11 @@ def trace_events(path: Path) -> list[dict]:
 
 
 def test_web_serial_drives_the_firmware(browser, server, tmp_path):
-    """Connect USB → HELLO/INFO, the pen's pattern uploaded at the pen's rate and swapped in at
-    the firmware; a pen stroke → SET_STATE playing=1 with the Eq. 1 gain, then playing=0;
+    """Connect USB → HELLO/INFO, the pen's pattern uploaded at the pen's rate (a PING answered
+    every 16 chunks) and swapped in at the firmware; a pen stroke → SET_STATE playing=1 with the
+    Eq. 1 gain, then playing=0; a refused pattern request → the server's reason; a recoverable
+    read error → the link reads on; the pen restarts behind the port (its boot EVENT) → pattern
+    uploaded again; a hung pen (PINGs unanswered) → port closed and opened again, HELLO first;
     another pen picked → its pattern uploaded and swapped in; the firmware stops → the panel
     says so and the page writes and sounds on; an old firmware → one clear line."""
     from realpen.device.sim import SimPen
@@ -387,17 +467,49 @@ def test_web_serial_drives_the_firmware(browser, server, tmp_path):
                 states = [e for e in trace_events(trace) if e["event"] == "set_state"]
                 return any(e["playing"] for e in states) and not states[-1]["playing"]
 
-            deadline = time.monotonic() + 5
-            while not lifted() and time.monotonic() < deadline:
-                page.wait_for_timeout(10)  # the bridge works while Playwright waits
+            until(page, lifted)
+            # A pattern the server refuses (a rate out of range, 422): its one-line reason.
+            detail = httpx.get(f"{server.base}api/pens/{pen}/pen-pattern",
+                               params={"rate": 5}).json()["detail"]
+            assert page.evaluate("""async (pen) => {
+              try { await window.realpen.penLink.fetchPattern(pen, 5); } catch (e) {
+                return e.message; }
+            }""", pen) == detail
+            # A recoverable read error (a buffer overrun) ends one read stream, not the link.
+            page.evaluate("window.__penGlitch()")
+            assert page.evaluate("async () => (await window.realpen.penLink.ping()).deviceUs") >= 0
+            assert page.evaluate("window.realpen.penDevice.state") == "connected"
+
+            def swaps():
+                return [e["id"] for e in trace_events(trace) if e["event"] == "swap"]
+
+            # The pen restarts behind a port that stays: its boot EVENT → the page uploads again.
+            sim.restart()
+            bridge.reopen()
+            until(page, lambda: len(swaps()) == 2)
+            page.wait_for_function("(pen) => window.realpen.penDevice.pattern === pen", arg=pen)
+            # A hung pen: two PINGs unanswered → the port is closed and opened again (as a pen
+            # reset by a watchdog would need); HELLO goes first, then the pattern again.
+            beat = "(ms) => { const link = window.realpen.penLink; link.heartbeatMs = ms; " \
+                   "link.scheduleBeat(); }"
+            page.evaluate(beat, 100)
+            bridge.frozen = True
+            lost = page.wait_for_function("""() => {
+              const s = window.realpen.penDevice; return s.state === 'disconnected' && s; }""")
+            page.evaluate(beat, 2000)
+            lost = lost.json_value()
+            assert "no answer to 2 PINGs in a row" in lost["message"]
+            assert "reconnecting" in lost["message"] and lost["info"] is None
+            page.wait_for_function("(pen) => window.realpen.penDevice.state === 'connected'"
+                                   " && window.realpen.penDevice.pattern === pen", arg=pen)
+            again = P.FrameDecoder().feed(bytes(bridge.written[bridge.opened[-1]:]))
+            assert len(bridge.opened) == 2 and again[0][0] == P.HELLO
+            until(page, lambda: len(swaps()) == 3)
             # Another pen picked on the page: its pattern goes to the pen, which swaps it in.
             other = next(p for p in ("ballpoint", "marker", "pencil") if p != pen)
             page.click(f'#pens [data-value="{other}"]')
             page.wait_for_function("(pen) => window.realpen.penDevice.pattern === pen", arg=other)
-            deadline = time.monotonic() + 5
-            while (sum(e["event"] == "swap" for e in trace_events(trace)) < 2
-                   and time.monotonic() < deadline):
-                page.wait_for_timeout(10)
+            until(page, lambda: len(swaps()) == 4)
             events = trace_events(trace)
         # The firmware's own record: what the page sent, the pattern it committed.
         states = [e for e in events if e["event"] == "set_state"]
@@ -405,19 +517,22 @@ def test_web_serial_drives_the_firmware(browser, server, tmp_path):
         assert playing and all(e["rate"] == P.RATE_ONE for e in states)
         assert any(e["gain"] > 0 for e in playing)
         assert states[-1]["playing"] == 0
-        swaps = [e for e in events if e["event"] == "swap"]
         second = httpx.get(f"{server.base}api/pens/{other}/pen-pattern", params={"rate": 8000})
-        assert [s["id"] for s in swaps] == [zlib.crc32(expected) & 0xFFFF,
-                                            zlib.crc32(second.content) & 0xFFFF]
+        first_id = zlib.crc32(expected) & 0xFFFF
+        assert [e["id"] for e in events if e["event"] == "swap"] == [
+            first_id, first_id, first_id, zlib.crc32(second.content) & 0xFFFF]
+        assert sum(e["event"] == "boot" for e in events) == 2
         frames = P.FrameDecoder().feed(bytes(bridge.written))
         chunks = b"".join(P.unpack_pattern_chunk(p)[1] for t, _, p in frames
                           if t == P.PATTERN_CHUNK)
-        assert chunks == expected + second.content
+        assert chunks == expected * 3 + second.content  # first, after the boot, after the hang
+        assert longest_chunk_run(frames) == 16  # then a PING, answered before the next chunk
         begin = next(P.unpack_pattern_begin(p) for t, _, p in frames if t == P.PATTERN_BEGIN)
         assert begin[1:] == (len(expected) // 2, 8000, P.FORMAT_S16LE, zlib.crc32(expected))
         # The firmware is gone (SimPen stopped): the panel says so, the page writes and sounds on.
         page.wait_for_function("() => document.getElementById('pen-status').textContent"
                                ".startsWith('Pen disconnected')")
+        assert page.evaluate("window.realpen.penDevice.info") is None
         assert page.evaluate("window.realpen.penDevice.state") == "disconnected"
         assert page.evaluate("() => window.realpen.audio.state") == "running"
         strokes = page.evaluate("window.realpen.strokes")
@@ -447,6 +562,38 @@ READ_TX = """() => {
   const t = window.realpen.penLink.transport;
   if (t && t.tx) t.tx.readValue().catch(() => {});
 }"""
+# RX writes fail once as a busy GATT queue makes them, then go through; and a PING whose seq a
+# stale request (an unanswered SET_STATE, 256 frames before) still holds. Each sets a result.
+WRITE_FAILS_ONCE = """() => {
+  const t = window.realpen.penLink.transport;
+  const write = t.rx.writeValueWithoutResponse.bind(t.rx);
+  let failed = false;
+  t.rx.writeValueWithoutResponse = (piece) => {
+    if (failed) return write(piece);
+    failed = true;
+    return Promise.reject(new DOMException('GATT operation already in progress.', 'NetworkError'));
+  };
+  window.__result = null;
+  window.realpen.penLink.ping().then(() => { window.__result = 'pong'; },
+    (e) => { window.__result = e.message; });
+}"""
+# The pen goes down while a SET_STATE write of this connection never settles.
+STATE_WRITE_HANGS = """() => {
+  const link = window.realpen.penLink;
+  const t = link.transport;
+  const write = t.write.bind(t);
+  t.write = (bytes) => (bytes[1] === 0x20 ? new Promise(() => {}) : write(bytes));
+  link.setState(true, 0.5, 5);
+}"""
+SEQ_WRAPS = """async () => {
+  const P = await import('/static/pen-protocol.js');
+  const link = window.realpen.penLink;
+  const seq = link.seq;
+  link.request(P.SET_STATE, P.packSetState(0, 0, P.RATE_ONE, 5), 30).catch(() => {});
+  link.seq = seq;
+  window.__result = null;
+  link.ping().then(() => { window.__result = 'pong'; }, (e) => { window.__result = e.message; });
+}"""
 
 
 class EmulatedPen:
@@ -474,7 +621,9 @@ class EmulatedPen:
         self.block = array("h", bytes(64))
         self.received = bytearray()
         self.writes: list[int] = []  # bytes of each RX write
+        self.lose_chunk = None  # the offset of a PATTERN_CHUNK to lose on the way, once
         self.reading = False
+        self.connected = False
         self.queue: list[tuple[str, dict]] = []
         self.bt = browser.new_browser_cdp_session()  # BluetoothEmulation is a browser domain
         self.cdp = page.context.new_cdp_session(page)
@@ -526,6 +675,7 @@ class EmulatedPen:
             except sync_api.Error:
                 pass  # the second announcement of a prompt already answered
         elif name == "gattOperationReceived":  # connection, service discovery: both succeed
+            self.connected = self.connected or event["type"] == "connection"
             self.bt.send("BluetoothEmulation.simulateGATTOperationResponse",
                          {"address": self.ADDRESS, "type": event["type"], "code": 0})
         elif name == "descriptorOperationReceived":
@@ -536,8 +686,16 @@ class EmulatedPen:
         else:
             cid, kind = event["characteristicId"], event["type"]
             if kind == "write":
+                if not self.connected:
+                    return  # written before the link dropped, lost with it
                 assert event["writeType"] == "write-without-response" and cid == self.rx
                 data = base64.b64decode(event["data"])
+                if self.lose_chunk is not None and data[-1:] == b"\x00":  # a frame a write
+                    frame = P.FrameDecoder().feed(data)[0]
+                    if (frame[0] == P.PATTERN_CHUNK
+                            and P.unpack_pattern_chunk(frame[2])[0] == self.lose_chunk):
+                        self.lose_chunk = None
+                        return
                 self.writes.append(len(data))
                 self.received += data
                 self.link.feed(data)
@@ -547,9 +705,12 @@ class EmulatedPen:
             elif kind == "read" and cid == self.battery:
                 self.respond(cid, kind, bytes([87]))
             elif kind == "read" and cid == self.tx:
-                self.respond(cid, kind, bytes(self.out[:512]))
-                del self.out[:512]
                 self.reading = False
+                try:
+                    self.respond(cid, kind, bytes(self.out[:512]))
+                except sync_api.Error:  # the connection dropped meanwhile: the read is void
+                    return
+                del self.out[:512]
             else:  # (un)subscribe
                 self.respond(cid, kind)
 
@@ -563,9 +724,17 @@ class EmulatedPen:
             self.page.wait_for_timeout(4)  # CDP events are delivered while Playwright waits
             while self.queue:
                 self.handle(*self.queue.pop(0))
-            if self.out and not self.reading:
+            if self.out and not self.reading and self.connected:
                 self.reading = True
                 self.page.evaluate(READ_TX)
+
+    def disconnect(self):
+        """The link drops: what the pen had yet to notify is lost. No read of TX may be under
+        way then (the emulation cannot answer it once the peripheral is gone)."""
+        self.pump(lambda: not self.reading)
+        self.connected = False
+        self.out.clear()
+        self.bt.send("BluetoothEmulation.simulateGATTDisconnection", {"address": self.ADDRESS})
 
     def close(self):
         self.bt.send("BluetoothEmulation.disable")
@@ -574,17 +743,20 @@ class EmulatedPen:
 
 def test_web_bluetooth_under_chromium_emulation(browser, server):
     """Connect Bluetooth → the chooser (CDP DeviceAccess) picks the emulated pen, INFO is read,
-    TX subscribed, the pattern uploaded through RX in writes ≤ 244 B and the pen core swaps it
-    in; a pen stroke → SET_STATE playing=1 then 0 at the pen core; a dropped connection → the
-    panel says so, the link reconnects and uploads again. Without Web Serial the USB button
-    gives way to a plain note; the server's own pen shows in the panel."""
+    TX subscribed, the pattern uploaded through RX in writes ≤ 244 B (a PING answered every 4
+    chunks) and the pen core swaps it in; a write that fails once goes again at the same size;
+    a stale request's timer leaves a newer one of the same seq alone; a pen stroke → SET_STATE
+    playing=1 then 0 at the pen core; a dropped connection → the panel says so, the link
+    reconnects and uploads again (a chunk lost on the way: the pen's NACK stops the upload at
+    the next PONG, and it is tried once more). Without Web Serial the USB button gives way to a
+    plain note; the server's own pen shows in the panel, in one line."""
     httpx = pytest.importorskip("httpx")
     context = browser.new_context(viewport={"width": 1180, "height": 820})
     context.set_default_timeout(10_000)
     context.add_init_script(NO_SERIAL)
     context.route("**/api/device", lambda route: route.fulfill(json={
-        "name": "sim", "kind": "sim", "connected": True, "message": "RealPen 1.0.0, 8000 Hz",
-        "info": None}))
+        "name": "sim", "kind": "sim", "connected": True,
+        "message": "connected: RealPen, firmware 1.0.0, 8000 Hz", "info": None}))
     page = context.new_page()
     problems: list[str] = []
     page.on("pageerror", lambda error: problems.append(str(error)))
@@ -594,13 +766,18 @@ def test_web_bluetooth_under_chromium_emulation(browser, server):
     try:
         pen = EmulatedPen(browser, page)
         name = page.evaluate("window.realpen.pen")
+        # The pattern's first 0.5 s (still many PING windows): each round trip through the
+        # emulation takes tens of ms, and the USB test uploads the whole pattern.
         expected = httpx.get(f"{server.base}api/pens/{name}/pen-pattern",
-                             params={"rate": 8000}).content
+                             params={"rate": 8000}).content[:8000]
+        context.route("**/pen-pattern?*", lambda route: route.fulfill(
+            body=expected, content_type="application/octet-stream"))
         page.click("#pen-device")
         assert not page.is_visible("#pen-usb") and page.is_visible("#pen-ble")
         assert "cannot reach a pen over USB serial" in page.text_content("#pen-note")
         page.wait_for_function("() => !document.getElementById('pen-bridge').hidden")
-        assert page.text_content("#pen-bridge").startswith("Server pen (sim): connected")
+        assert page.text_content("#pen-bridge") == ("Server pen (sim): connected: RealPen, "
+                                                    "firmware 1.0.0, 8000 Hz")
         page.click("#pen-ble", no_wait_after=True)
         done = f"() => window.realpen.penDevice.pattern === {json.dumps(name)}"
         pen.pump(lambda: page.evaluate(done))
@@ -618,19 +795,44 @@ def test_web_bluetooth_under_chromium_emulation(browser, server):
                         if t == P.PATTERN_CHUNK) == expected
         # A frame a write, each within one write at ATT MTU 247 (244 bytes).
         assert len(pen.writes) == len(frames) and max(pen.writes) <= 244
+        assert longest_chunk_run(frames) == 4  # then a PING, answered before the next chunk
+        page.evaluate(WRITE_FAILS_ONCE)
+        pen.pump(lambda: page.evaluate("window.__result"))
+        assert page.evaluate("[window.__result, window.realpen.penLink.transport.piece]") \
+            == ["pong", 0]
+        page.evaluate(SEQ_WRAPS)
+        page.wait_for_timeout(60)  # nothing answered meanwhile: the stale request times out
+        pen.pump(lambda: page.evaluate("window.__result"))
+        assert page.evaluate("window.__result") == "pong"
         pen_stroke(page)
         pen.pump(lambda: any(s[0] == 1 for s in pen.states) and pen.states[-1][0] == 0)
         assert any(s[0] == 1 and s[1] > 0 for s in pen.states)
         assert all(s[2] == P.RATE_ONE for s in pen.states)
-        # The connection drops: the panel says so; the link connects again and uploads again.
+        # The connection drops (a SET_STATE write hanging): the panel says so; the link connects
+        # again, sends the state (the hung write holds up only its own connection's states) and
+        # uploads again.
         begins = sum(t == P.PATTERN_BEGIN for t, _, _ in frames)
-        pen.bt.send("BluetoothEmulation.simulateGATTDisconnection", {"address": pen.ADDRESS})
+        page.evaluate(STATE_WRITE_HANGS)
+        states = len(pen.states)
+        pen.disconnect()
         pen.pump(lambda: "Pen disconnected" in page.text_content("#pen-status"))
         assert page.evaluate("window.realpen.penDevice.state") == "disconnected"
         pen.build_gatt()
+        pen.lose_chunk = P.MAX_CHUNK
         pen.pump(lambda: page.evaluate(done + " && window.realpen.penDevice.state === 'connected'"))
         frames = P.FrameDecoder().feed(bytes(pen.received))
-        assert sum(t == P.PATTERN_BEGIN for t, _, _ in frames) == begins + 1
+        assert sum(t == P.PATTERN_BEGIN for t, _, _ in frames) == begins + 2
+        assert pen.lose_chunk is None
+        first, again = [i for i, (t, _, _) in enumerate(frames) if t == P.PATTERN_BEGIN][-2:]
+        assert [t for t, _, _ in frames[first:again]].count(P.PATTERN_CHUNK) == 3  # 4th: PING
+        assert (1, 32768, P.RATE_ONE, 5) in pen.states[states:]
+        page.evaluate("window.realpen.penLink.setState(false, 0)")
+
+        def swapped():  # the pen, playing, swaps in the new pattern at its next wrap or idle
+            pen.pen.fill(pen.block)  # its audio loop runs on
+            return pen.states[-1][0] == 0 and len(pen.swaps) == 2
+
+        pen.pump(swapped)
         assert problems == []
     finally:
         if pen is not None:

@@ -98,12 +98,21 @@ Object.defineProperties(state, {
   inkedPixels: { value: () => ink.inkedPixels() },
 });
 
+/** A pen's pattern for its own link (int16 LE at `rate` Hz); a refusal says the server's
+ *  reason (its one-line `detail`, e.g. a rate the pattern cannot take), not only the status. */
+async function getPenPattern(name, rate) {
+  const response = await fetch(withToken(
+    `api/pens/${encodeURIComponent(name)}/pen-pattern?rate=${rate}`));
+  if (!response.ok) {
+    let detail = null;
+    try { ({ detail } = await response.json()); } catch { /* not JSON */ }
+    throw new Error(typeof detail === 'string' && detail ? detail : `HTTP ${response.status}`);
+  }
+  return response.arrayBuffer();
+}
+
 // The pen's own link: it never waits on the page, nor the page on it.
-const penLink = new PenLink({
-  fetchPattern: (name, rate) => getBytes(
-    `api/pens/${encodeURIComponent(name)}/pen-pattern?rate=${rate}`),
-  onChange: scheduleStatus,
-});
+const penLink = new PenLink({ fetchPattern: getPenPattern, onChange: scheduleStatus });
 Object.defineProperties(state, {
   penDevice: { enumerable: true, get: () => ({ ...penLink.status }) },
   penLink: { value: penLink },
@@ -374,10 +383,12 @@ function renderPen() {
   const progress = $('pen-progress');
   progress.hidden = s.progress === null || s.progress === undefined;
   if (!progress.hidden) $('pen-progress-bar').style.width = `${(s.progress * 100).toFixed(1)}%`;
-  // While a pen is (being) connected, or Bluetooth is reconnecting, only Disconnect is offered;
-  // otherwise what the browser can (a lost USB port may be picked again).
+  // While a pen is (being) connected, or the link is reconnecting (Bluetooth; USB after a pen
+  // that stopped answering), only Disconnect is offered; otherwise what the browser can (a lost
+  // USB port may be picked again).
   const active = penLink.connected || s.state === 'connecting'
-    || (s.state === 'disconnected' && !penLink.userClosed && s.kind === 'ble');
+    || (s.state === 'disconnected' && !penLink.userClosed
+      && (s.kind === 'ble' || Boolean(penLink.reconnecting)));
   const can = penSupport();
   $('pen-disconnect').hidden = !active;
   $('pen-usb').hidden = active || !can.serial;
@@ -385,9 +396,10 @@ function renderPen() {
   const line = $('pen-bridge');
   line.hidden = !server;
   if (server) {
+    // The bridge's message is a whole status line ("connected: RealPen, firmware …",
+    // "disconnected: …; reconnecting"); the flag speaks only when it says nothing.
     const how = { true: 'connected', false: 'not connected' }[server.connected] || 'no status';
-    line.textContent = `Server pen (${server.name}): ${how}`
-      + `${server.message ? ` — ${server.message}` : ''}`;
+    line.textContent = `Server pen (${server.name}): ${server.message || how}`;
     line.dataset.connected = String(server.connected);
   }
 }

@@ -7,20 +7,26 @@
 //   LE): PATTERN_BEGIN → ACK, PATTERN_CHUNKs, PATTERN_COMMIT → ACK; the pen keeps its old
 //   pattern until the new one is complete and checked
 //   → SET_STATE on every pen down, gain change and pen up (the whole state each time, latest
-//   wins, sent again every REFRESH_MS so a lost frame is mended).
+//   wins, sent again every REFRESH_MS so a lost frame is mended)
+//   → a PING every HEARTBEAT_MS while nothing else is asked: a pen that misses two PONGs in a
+//   row has hung, and is let go of and connected again.
 //
 // Nothing here can stop the page: the page's own sound and ink never wait for the pen, every
 // error becomes the status line, and a pen that disconnects is reconnected (Bluetooth: the same
-// device, with backoff; USB: when the port comes back) and gets its pattern and state again.
+// device, with backoff; USB: when the port comes back, or at once when the pen only stopped
+// answering) and gets its pattern and state again, as after the pen's boot EVENT (a pen that
+// restarted behind a port that stayed).
 //
 // Bluetooth: RX is written without response, a frame per write (a frame is at most ~192 bytes:
 // one write at the ATT MTU of 247 the firmware asks for). The page cannot see the MTU Chrome
-// negotiated: when a write fails the link goes on in smaller pieces (BLE_PIECES), which the
-// pen's decoder joins again, as it joins TX notifications, pieces of the same byte stream as
-// USB, here.
+// negotiated: when a write fails twice the link goes on in smaller pieces (BLE_PIECES), which
+// the pen's decoder joins again, as it joins TX notifications, pieces of the same byte stream as
+// USB, here. Writes without response have no flow control: an upload waits for a PONG every
+// few chunks so that it never runs further ahead of the pen than the pen's buffer holds.
 
 import {
-  ACK, BLE_INFO, BLE_RX, BLE_SERVICE, BLE_TX, E_VERSION, EV_BATTERY, EV_UNDERRUN, EVENT,
+  ACK, BLE_INFO, BLE_RX, BLE_SERVICE, BLE_TX, E_BAD_FORMAT, E_BAD_RATE, E_TOO_LARGE, E_VERSION,
+  EV_BATTERY, EV_BOOT, EV_UNDERRUN, EVENT,
   FORMAT_S16LE, FrameDecoder, GAIN_ONE, HELLO, INFO, MAX_CHUNK, NACK, NACK_TEXT, PATTERN_BEGIN,
   PATTERN_CHUNK, PATTERN_COMMIT, PING, PONG, PROTOCOL_VERSION, RATE_ONE, SET_STATE, crc32,
   encodeFrame, packHello, packPatternBegin, packPatternChunk, packPatternCommit, packPing,
@@ -37,6 +43,16 @@ const HELLO_TRIES = 3; // a pen that has just booted may miss the first HELLO
 const REFRESH_MS = 1000; // the current state goes again this often (SET_STATE is unanswered)…
 const REFRESH_FOR_MS = 3000; // …while the pen plays and for this long after the last change
 const RETRY_MAX_MS = 1000; // reconnect backoff ceiling
+// Pattern chunks an upload sends before it waits for the pen (a PING answered), as the Python
+// host does (realpen.device.transport UPLOAD_WINDOW, BLE_UPLOAD_WINDOW): ≈ 2.9 KB over USB;
+// over Bluetooth 4 (≈ 760 B): the Pico W's receive buffer holds 4 KB and drains slowly.
+const UPLOAD_WINDOW = 16;
+const BLE_UPLOAD_WINDOW = 4;
+const UPLOAD_TRIES = 2; // a failed upload is tried once more (not when the pen refused the pattern)
+const HEARTBEAT_MS = 2000; // an idle link PINGs this often…
+const HEARTBEAT_MISSES = 2; // …and a pen that misses this many PONGs in a row has hung
+const WRITE_RETRY_MS = 20; // a failed Bluetooth write goes again after this
+const CLOSE_WAIT_MS = 1000; // a hung pen's port may take long to close: reopen after this at most
 
 const hasSerial = () => typeof navigator !== 'undefined' && 'serial' in navigator;
 const hasBluetooth = () => typeof navigator !== 'undefined' && 'bluetooth' in navigator;
@@ -84,24 +100,25 @@ class SerialTransport {
 
   async readLoop() {
     let reason = 'the port closed';
-    try {
-      while (!this.closed) {
-        this.reader = this.port.readable.getReader();
-        try {
-          for (;;) {
-            const { value, done } = await this.reader.read();
-            if (done) break;
-            if (value && value.length) this.onData(value);
-          }
-        } finally {
-          this.reader.releaseLock();
+    let stream = this.port.readable;
+    while (!this.closed && stream) {
+      reason = 'the port closed';
+      this.reader = stream.getReader();
+      try {
+        for (;;) {
+          const { value, done } = await this.reader.read();
+          if (done) break;
+          if (value && value.length) this.onData(value);
         }
-        // A recoverable read error (framing, parity, buffer overrun) leaves `readable` usable:
-        // read on; a lost device leaves it null.
-        if (!this.port.readable) break;
+      } catch (error) {
+        // A recoverable read error (framing, parity, break, buffer overrun) ends this stream
+        // only: the port hands out a new one and reading goes on. A lost device leaves none.
+        reason = describe(error);
+      } finally {
+        this.reader.releaseLock();
       }
-    } catch (error) {
-      reason = describe(error);
+      const next = this.port.readable;
+      stream = next === stream ? null : next; // the same stream again has ended for good
     }
     this.lost(reason);
   }
@@ -199,19 +216,32 @@ class BleTransport {
 
   async writePieces(bytes) {
     let at = 0;
+    let failed = 0; // failures of this piece at this size
     while (at < bytes.length) {
       if (this.closed) throw new PenError('the pen disconnected');
       const piece = bytes.subarray(at, at + BLE_PIECES[this.piece]);
       try {
         await this.rx.writeValueWithoutResponse(piece);
       } catch (error) {
-        // A write longer than the ATT MTU allows fails: go on with smaller pieces.
-        if (this.piece < BLE_PIECES.length - 1 && this.device.gatt.connected) {
+        if (this.closed || !this.device.gatt.connected) throw error;
+        failed += 1;
+        // A write fails for passing reasons too ("GATT operation already in progress", a busy
+        // controller): the same piece goes once more before the size is blamed.
+        if (failed === 1) {
+          await sleep(WRITE_RETRY_MS);
+          continue;
+        }
+        // Failed twice: longer than the ATT MTU allows, if a smaller piece would be shorter;
+        // the link goes on in smaller pieces for good.
+        const smaller = BLE_PIECES[this.piece + 1];
+        if (smaller !== undefined && piece.length > smaller) {
           this.piece += 1;
+          failed = 0;
           continue;
         }
         throw error;
       }
+      failed = 0;
       at += piece.length;
     }
   }
@@ -242,6 +272,9 @@ class BleTransport {
  * an upload), battery (% from the Bluetooth Battery service, or null), batteryMv (mV from the
  * pen's battery EVENT, or null), sent (SET_STATE frames written), errors (frames the decoder
  * dropped), underruns (the pen's underrun count, from its EVENTs) }.
+ *
+ * heartbeatMs (default HEARTBEAT_MS) is how often an idle link PINGs; a change takes effect
+ * from the next beat, or at once after scheduleBeat().
  */
 export class PenLink {
   constructor({ fetchPattern, onChange = () => {} } = {}) {
@@ -254,8 +287,12 @@ export class PenLink {
     this.wanted = { playing: false, gain: 0, fadeMs: 5 };
     this.changedAt = 0;
     this.sentState = null;
-    this.stateBusy = false;
+    this.stateBusy = null; // the generation whose SET_STATE write is under way
     this.stateDirty = false;
+    this.chunkRefused = null; // the NACK code of a refused PATTERN_CHUNK of this upload
+    this.reconnecting = null; // the token of the reconnect loop under way
+    this.heartbeatMs = HEARTBEAT_MS;
+    this.missed = 0; // PONGs missed in a row
     this.pen = null; // the page's pen (profile name)
     this.holds = null; // `${pen}@${rate}#${crc32}` of the pattern the pen holds
     this.uploading = null;
@@ -268,6 +305,7 @@ export class PenLink {
       const recent = performance.now() - this.changedAt < REFRESH_FOR_MS;
       if (this.wanted.playing || recent) this.sendState(true);
     }, REFRESH_MS);
+    this.scheduleBeat();
     if (hasSerial()) {
       navigator.serial.addEventListener('connect', (event) => this.portBack(event.target));
     }
@@ -352,6 +390,9 @@ export class PenLink {
     this.decoder = new FrameDecoder();
     this.holds = null;
     this.sentState = null;
+    this.stateDirty = false;
+    this.missed = 0;
+    this.status.info = null; // until this pen's HELLO: no state nor upload goes out
     try {
       await transport.open((bytes) => this.received(bytes, transport),
         (reason) => this.lost(transport, reason));
@@ -361,7 +402,7 @@ export class PenLink {
       }
       this.transport = transport;
       const info = await this.hello(transport);
-      if (generation !== this.generation) return;
+      if (generation !== this.generation) return false;
       this.update({ state: 'connected', info, pattern: null, battery: transport.battery ?? null,
         message: `${this.describePen(info, transport)}: connected.` });
       this.sendState();
@@ -393,11 +434,11 @@ export class PenLink {
   lostMessage(reason, detail = '') {
     let next = '';
     if (!this.userClosed) {
-      next = this.status.kind === 'usb' ? '; it reconnects when the port is back'
-        : '; reconnecting…';
+      next = this.reconnecting || this.status.kind !== 'usb' ? '; reconnecting…'
+        : '; it reconnects when the port is back';
     }
-    return `Pen disconnected (${reason})${next}${detail ? ` (${detail})` : ''}. `
-      + 'The page\'s own sound goes on.';
+    const text = `Pen disconnected (${reason})${next}${detail ? ` (${detail})` : ''}`;
+    return `${text}${text.endsWith('…') ? '' : '.'} The page's own sound goes on.`;
   }
 
   /** HELLO → INFO (USB), or the INFO characteristic (Bluetooth); checks the version. */
@@ -447,28 +488,47 @@ export class PenLink {
       features, name };
   }
 
-  lost(transport, reason) {
+  /** `transport` is gone. Bluetooth (or `reopen`) connects again to the same device or port
+   *  once `closing` (the old link's close) is done; USB waits for the port to come back. */
+  lost(transport, reason, reopen = transport.kind === 'ble', closing = null) {
     if (transport !== this.transport) return;
     this.transport = null;
     this.generation += 1;
     this.failPending(reason);
-    this.update({ state: 'disconnected', progress: null, pattern: null,
+    const token = reopen && !this.userClosed ? {} : null;
+    this.reconnecting = token;
+    // What the pen is, holds and plays is unknown until it says HELLO again: nothing may go
+    // out with the INFO of before (the state refresh, a change of pen).
+    this.update({ state: 'disconnected', info: null, progress: null, pattern: null,
       message: this.lostMessage(reason) });
-    if (!this.userClosed && transport.kind === 'ble') this.reconnectBle(transport, reason);
+    if (token) this.reconnect(transport, reason, token, closing);
   }
 
-  /** Bluetooth: connect to the same device again, backing off to RETRY_MAX_MS, until it
-   *  works, the user disconnects or connects another pen. */
-  async reconnectBle(old, reason) {
-    const token = {};
-    this.reconnecting = token;
+  /** The pen stopped answering (hung, or its end of the link did): let go of the link and
+   *  connect to the same device or port again. */
+  hangUp(transport, reason) {
+    if (transport !== this.transport) return;
+    const closing = transport.close().catch(() => {});
+    this.lost(transport, reason, true, closing);
+  }
+
+  /** Connect to the same Bluetooth device or serial port again, backing off to RETRY_MAX_MS,
+   *  until it works, the user disconnects or connects another pen (or the port comes back). */
+  async reconnect(old, reason, token, closing = null) {
     const going = () => !this.userClosed && this.reconnecting === token && !this.transport;
-    let wait = 200;
-    while (going()) {
-      await sleep(wait);
-      if (!going()) return;
-      if (await this.open(new BleTransport(old.device), reason)) return;
-      wait = Math.min(wait * 2, RETRY_MAX_MS);
+    try {
+      if (closing) await Promise.race([closing, sleep(CLOSE_WAIT_MS)]);
+      let wait = 200;
+      while (going()) {
+        await sleep(wait);
+        if (!going()) return;
+        const again = old.kind === 'ble' ? new BleTransport(old.device)
+          : new SerialTransport(old.port);
+        if (await this.open(again, reason)) return;
+        wait = Math.min(wait * 2, RETRY_MAX_MS);
+      }
+    } finally {
+      if (this.reconnecting === token) this.reconnecting = null;
     }
   }
 
@@ -499,7 +559,10 @@ export class PenLink {
         continue;
       }
       const waiting = this.pending.get(seq);
-      if (!waiting) continue; // a late reply, or a NACK of an unanswered frame
+      if (!waiting) { // a late reply, or a NACK of an unanswered frame
+        if (ftype === NACK) this.refused(payload);
+        continue;
+      }
       this.pending.delete(seq);
       clearTimeout(waiting.timer);
       waiting.resolve([ftype, seq, payload]);
@@ -507,12 +570,36 @@ export class PenLink {
     if (this.decoder.errors !== this.status.errors) this.update({ errors: this.decoder.errors });
   }
 
-  event(payload) {
+  /** A NACK nobody waits for: a refused PATTERN_CHUNK fails the upload at its next PONG. */
+  refused(payload) {
     try {
-      const [kind, value] = unpackEvent(payload);
-      if (kind === EV_BATTERY) this.update({ batteryMv: value });
-      else if (kind === EV_UNDERRUN) this.update({ underruns: value }); // the pen's count
-    } catch { /* a malformed event is only an event */ }
+      const [ftype, code] = unpackNack(payload);
+      if (ftype === PATTERN_CHUNK && this.uploading && this.chunkRefused === null) {
+        this.chunkRefused = code;
+      }
+    } catch { /* a malformed NACK says nothing */ }
+  }
+
+  event(payload) {
+    let kind;
+    let value;
+    try {
+      [kind, value] = unpackEvent(payload);
+    } catch { return; } // a malformed event is only an event
+    if (kind === EV_BATTERY) this.update({ batteryMv: value });
+    else if (kind === EV_UNDERRUN) this.update({ underruns: value }); // the pen's count
+    else if (kind === EV_BOOT) this.rebooted();
+  }
+
+  /** The pen started again behind a link that stayed (a USB-serial adapter, a watchdog
+   *  reset): it holds no pattern and plays nothing, so both go again. */
+  rebooted() {
+    this.holds = null;
+    this.sentState = null;
+    if (!this.transport || !this.status.info) return; // still saying HELLO: open() sends both
+    this.update({ pattern: null });
+    this.sendState();
+    this.syncPattern().catch(() => {}); // reported in the status
   }
 
   /** Send a frame and wait for the reply with its seq: [ftype, seq, payload]. */
@@ -520,18 +607,23 @@ export class PenLink {
     if (!transport) return Promise.reject(new PenError('no pen connected'));
     const seq = this.nextSeq();
     return new Promise((resolve, reject) => {
-      const timer = setTimeout(() => {
+      const entry = { resolve, reject, timer: null };
+      // Seqs wrap at 256: a stale timer or write error must not take a newer request's entry.
+      const drop = () => {
+        if (this.pending.get(seq) !== entry) return false;
         this.pending.delete(seq);
+        clearTimeout(entry.timer);
+        return true;
+      };
+      entry.timer = setTimeout(() => {
+        drop();
         const error = new PenError(`the pen did not answer within ${timeoutMs} ms`);
         error.timeout = true;
         reject(error);
       }, timeoutMs);
-      this.pending.set(seq, { resolve, reject, timer });
+      this.pending.set(seq, entry);
       transport.write(encodeFrame(ftype, seq, payload)).catch((error) => {
-        if (!this.pending.has(seq)) return;
-        this.pending.delete(seq);
-        clearTimeout(timer);
-        reject(error);
+        if (drop()) reject(error);
       });
     });
   }
@@ -545,14 +637,41 @@ export class PenLink {
   }
 
   /** PING → PONG: { roundTripMs, deviceUs }. */
-  async ping() {
+  async ping(timeoutMs = REPLY_MS, transport = this.transport) {
     const token = (Math.random() * 0x100000000) >>> 0;
     const started = performance.now();
-    const [ftype, , payload] = await this.request(PING, packPing(token));
+    const [ftype, , payload] = await this.request(PING, packPing(token), timeoutMs, transport);
     if (ftype !== PONG) throw new PenError(`the pen answered PING with frame type ${ftype}`);
     const [echo, deviceUs] = unpackPong(payload);
     if (echo !== token) throw new PenError('the pen answered another PING');
     return { roundTripMs: performance.now() - started, deviceUs };
+  }
+
+  /** The next heartbeat in heartbeatMs (one chain of them: a call replaces the next beat). */
+  scheduleBeat() {
+    clearTimeout(this.heartbeat);
+    this.heartbeat = setTimeout(() => {
+      this.beat().finally(() => this.scheduleBeat());
+    }, this.heartbeatMs);
+  }
+
+  /** PING an idle pen (nothing asked, nothing uploading): without it a hung pen would look
+   *  connected for good. HEARTBEAT_MISSES PONGs missed in a row → hang up and reconnect. */
+  async beat() {
+    const transport = this.transport;
+    if (!transport || this.status.state !== 'connected' || this.uploading || this.pending.size) {
+      return;
+    }
+    try {
+      await this.ping(Math.min(REPLY_MS, this.heartbeatMs), transport);
+      if (transport === this.transport) this.missed = 0;
+    } catch (error) {
+      if (transport !== this.transport || !(error instanceof PenError && error.timeout)) return;
+      this.missed += 1;
+      if (this.missed >= HEARTBEAT_MISSES) {
+        this.hangUp(transport, `no answer to ${this.missed} PINGs in a row`);
+      }
+    }
   }
 
   // ---- the pattern ----
@@ -564,18 +683,21 @@ export class PenLink {
   }
 
   async syncPattern() {
-    const info = this.status.info;
-    if (!this.transport || !info || !this.pen || !this.fetchPattern) return;
+    if (!this.transport || !this.status.info || !this.pen || !this.fetchPattern) return;
     if (this.uploading) {
-      this.uploadAgain = true; // the pen changed mid-upload: the latest pen goes next
+      // The pen changed (or restarted, or was connected again) mid-upload: the latest pen
+      // goes next, with the latest INFO.
+      this.uploadAgain = true;
       return;
     }
     this.uploading = this.pen;
     try {
       do {
         this.uploadAgain = false;
+        const info = this.status.info;
+        if (!this.transport || !info) break;
         await this.upload(this.pen, info);
-      } while (this.uploadAgain && this.transport);
+      } while (this.uploadAgain);
     } finally {
       this.uploading = null;
     }
@@ -604,44 +726,78 @@ export class PenLink {
         + `(at most ${info.maxPatternBytes} bytes); the pen keeps its last pattern.` });
       return;
     }
+    this.update({ state: 'uploading', progress: 0, message: `Uploading the ${name} pattern…` });
+    for (let attempt = 1; ; attempt += 1) {
+      try {
+        if (!await this.sendPattern(name, bytes, crc, info, transport, generation)) return;
+        this.holds = key;
+        this.update({ state: 'connected', pattern: name, progress: null,
+          message: `${this.describePen(info, transport)}: ${name} pattern loaded `
+            + `(${(bytes.length / 2 / info.sampleRate).toFixed(2)} s).` });
+        return;
+      } catch (error) {
+        if (generation !== this.generation) return;
+        // Once more (a lost frame, a late reply, a damaged chunk), unless the pen refused the
+        // pattern itself: that would only be refused again.
+        if (attempt < UPLOAD_TRIES && !error.refused) {
+          this.update({ progress: 0,
+            message: `Uploading the ${name} pattern again (${describe(error)})…` });
+          continue;
+        }
+        this.update({ state: 'connected', progress: null,
+          message: `Upload of the ${name} pattern failed: ${describe(error)}` });
+        return;
+      }
+    }
+  }
+
+  /** PATTERN_BEGIN → ACK, the chunks, PATTERN_COMMIT → ACK (the pen keeps its old pattern
+   *  until then). Resolves false when another connection overtook this one; throws PenError
+   *  (`refused` set when the pen refused the pattern as such: too large, format, rate). */
+  async sendPattern(name, bytes, crc, info, transport, generation) {
     const pid = crc & 0xffff;
+    const refusal = (what, code) => {
+      const error = new PenError(`The pen refused the ${name} pattern (${what}): `
+        + `${NACK_TEXT[code] || `error ${code}`}; it keeps its last pattern.`);
+      error.refused = [E_TOO_LARGE, E_BAD_FORMAT, E_BAD_RATE].includes(code);
+      return error;
+    };
     const fail = (what, reply) => {
       const [ftype, , payload] = reply;
-      if (ftype === NACK) {
-        const [, code] = unpackNack(payload);
-        return new PenError(`The pen refused the ${name} pattern (${what}): `
-          + `${NACK_TEXT[code] || `error ${code}`}; it keeps its last pattern.`);
-      }
+      if (ftype === NACK) return refusal(what, unpackNack(payload)[1]);
       return new PenError(`The pen answered ${what} with frame type ${ftype}.`);
     };
     const acked = (reply, ftype) => reply[0] === ACK && unpackAck(reply[2]) === ftype;
-    this.update({ state: 'uploading', progress: 0, message: `Uploading the ${name} pattern…` });
-    try {
-      const begin = await this.request(PATTERN_BEGIN,
-        packPatternBegin(pid, bytes.length / 2, info.sampleRate, FORMAT_S16LE, crc),
-        REPLY_MS, transport);
-      if (!acked(begin, PATTERN_BEGIN)) throw fail('PATTERN_BEGIN', begin);
-      for (let offset = 0; offset < bytes.length; offset += MAX_CHUNK) {
-        if (generation !== this.generation) return;
-        const chunk = bytes.subarray(offset, offset + MAX_CHUNK);
-        // Chunks go unanswered (a wrong one is NACKed, and COMMIT then fails): awaiting each
-        // write only paces them, and lets a SET_STATE in between.
-        await transport.write(encodeFrame(PATTERN_CHUNK, this.nextSeq(),
-          packPatternChunk(offset, chunk)));
-        this.update({ progress: (offset + chunk.length) / bytes.length });
+    this.chunkRefused = null;
+    const begin = await this.request(PATTERN_BEGIN,
+      packPatternBegin(pid, bytes.length / 2, info.sampleRate, FORMAT_S16LE, crc),
+      REPLY_MS, transport);
+    if (!acked(begin, PATTERN_BEGIN)) throw fail('PATTERN_BEGIN', begin);
+    const window = transport.kind === 'ble' ? BLE_UPLOAD_WINDOW : UPLOAD_WINDOW;
+    let count = 0;
+    for (let offset = 0; offset < bytes.length; offset += MAX_CHUNK) {
+      if (generation !== this.generation) return false;
+      const chunk = bytes.subarray(offset, offset + MAX_CHUNK);
+      // Chunks go unanswered (a wrong one is NACKed): awaiting each write only paces them,
+      // and lets a SET_STATE in between.
+      await transport.write(encodeFrame(PATTERN_CHUNK, this.nextSeq(),
+        packPatternChunk(offset, chunk)));
+      count += 1;
+      // Every `window` chunks the pen must have handled all so far (its PONG comes after
+      // them): a link without flow control (Bluetooth writes without response) never runs
+      // further ahead of the pen than its receive buffer holds, and a refused chunk stops the
+      // upload early.
+      if (count % window === 0) {
+        await this.ping(REPLY_MS, transport);
+        if (this.chunkRefused !== null) throw refusal('PATTERN_CHUNK', this.chunkRefused);
       }
-      const commit = await this.request(PATTERN_COMMIT, packPatternCommit(pid), COMMIT_MS,
-        transport);
-      if (!acked(commit, PATTERN_COMMIT)) throw fail('PATTERN_COMMIT', commit);
-      this.holds = key;
-      this.update({ state: 'connected', pattern: name, progress: null,
-        message: `${this.describePen(info, transport)}: ${name} pattern loaded `
-          + `(${(bytes.length / 2 / info.sampleRate).toFixed(2)} s).` });
-    } catch (error) {
-      if (generation !== this.generation) return;
-      this.update({ state: 'connected', progress: null,
-        message: `Upload of the ${name} pattern failed: ${describe(error)}` });
+      this.update({ progress: (offset + chunk.length) / bytes.length });
     }
+    const commit = await this.request(PATTERN_COMMIT, packPatternCommit(pid), COMMIT_MS,
+      transport);
+    if (this.chunkRefused !== null) throw refusal('PATTERN_CHUNK', this.chunkRefused);
+    if (!acked(commit, PATTERN_COMMIT)) throw fail('PATTERN_COMMIT', commit);
+    return true;
   }
 
   // ---- the state ----
@@ -667,17 +823,23 @@ export class PenLink {
     const frame = [playing ? 1 : 0, Math.round(gain * GAIN_ONE), RATE_ONE, fadeMs];
     const same = this.sentState && frame.every((v, i) => v === this.sentState[i]);
     if (same && !again) return;
-    if (this.stateBusy) {
+    const generation = this.generation;
+    if (this.stateBusy === generation) {
       this.stateDirty = true;
       return;
     }
-    this.stateBusy = true;
+    this.stateBusy = generation;
     this.sentState = frame;
     transport.write(encodeFrame(SET_STATE, this.nextSeq(), packSetState(...frame)))
       .then(() => { this.status.sent += 1; })
-      .catch(() => { this.sentState = null; }) // the disconnect is reported by the transport
+      .catch(() => { // the disconnect is reported by the transport
+        if (generation === this.generation) this.sentState = null;
+      })
       .finally(() => {
-        this.stateBusy = false;
+        // Busy is per connection: a write of an older one that settles late (or never) holds
+        // up no state of a later one.
+        if (this.stateBusy !== generation) return;
+        this.stateBusy = null;
         if (this.stateDirty) {
           this.stateDirty = false;
           this.sendState();

@@ -233,12 +233,14 @@ export function encodeFrame(ftype, seq, payload = new Uint8Array(0)) {
 /**
  * Frames out of a byte stream cut anywhere (serial reads, BLE notifications): feed() returns
  * the complete frames as [ftype, seq, payload] and keeps the rest for the next call. A bad
- * frame (COBS, CRC, shorter than type + seq + CRC, an encoded block longer than a frame of
- * maxFrame bytes can become) is dropped and counted in `errors`; decoding starts again after
- * the next 0x00. The buffer is fixed: no input makes it grow.
+ * frame (COBS, CRC, shorter than type + seq + CRC, longer than maxFrame bytes once decoded, an
+ * encoded block longer than a frame of maxFrame bytes can become) is dropped and counted in
+ * `errors`; decoding starts again after the next 0x00. The buffer is fixed: no input makes it
+ * grow.
  */
 export class FrameDecoder {
   constructor(maxFrame = MAX_FRAME) {
+    this.maxFrame = maxFrame;
     this.limit = maxFrame + Math.floor(maxFrame / 254) + 2; // as protocol.py's max_encoded
     this.buffer = new Uint8Array(this.limit);
     this.length = 0;
@@ -282,7 +284,9 @@ export class FrameDecoder {
       this.errors += 1;
       return null;
     }
-    if (raw.length < 4) {
+    // The encoded limit lets through a few bytes more than maxFrame decodes to (COBS adds at
+    // least one): a well-formed frame that decodes longer is as bad as protocol.py finds it.
+    if (raw.length < 4 || raw.length > this.maxFrame) {
       this.errors += 1;
       return null;
     }
