@@ -1,4 +1,4 @@
-"""Latency to the pen: the page's pointer-down → SET_STATE at the pen, and a 24 KB upload.
+"""Latency to the pen: the page's pen_down message → SET_STATE at the pen, and a 24 KB upload.
 
 The live app runs in a child process (the same app ``realpen serve --device sim`` builds,
 :func:`realpen.live.device.open_device`, under uvicorn on loopback), driving the simulated pen:
@@ -9,15 +9,18 @@ then a ``gain`` and a ``pen_up``, each waiting for its ack and ``--gap-ms`` apar
 has the SET_STATE each block of its player (16 samples, 2 ms) applied, with the time its frame
 was decoded; the gap keeps every frame in a block of its own. For every stroke
 
-- pointer-down → SET_STATE: the firmware's receipt of the stroke's ``SET_STATE(playing=1)``
-  (``t_ns`` in its trace) minus the time the ``pen_down`` message was sent;
-- gain → SET_STATE: the same for the stroke's gain;
-- the warm-up stroke's pointer-down → SET_STATE, which waited for the pattern's upload (what a
-  change of pen costs).
+- page message (pen_down) → SET_STATE: the firmware's receipt of the stroke's
+  ``SET_STATE(playing=1)`` (``t_ns`` in its trace) minus the time the page's ``pen_down``
+  WebSocket message was sent;
+- page message (gain) → SET_STATE: the same for the stroke's gain;
+- the warm-up stroke's page message (pen_down) → SET_STATE, which waited for the pattern's
+  upload (what a change of pen costs: the new pen's pattern is uploaded at its first pen-down).
 
-Both sides read ``time.time_ns()`` (CLOCK_REALTIME, one clock on one machine), so the one-way
-figures need no clock sync. The path: WebSocket → the server's session → the bridge's queue →
-its worker thread → pyserial → the pseudo-terminal → the firmware's decoder.
+The clock starts when the WebSocket message is sent: there is no browser, so the pointer event's
+way through the browser to the page's send is not in these figures. Both sides read
+``time.time_ns()`` (CLOCK_REALTIME, one clock on one machine), so the one-way figures need no
+clock sync. The path: WebSocket → the server's session → the bridge's queue → its worker thread
+→ pyserial → the pseudo-terminal → the firmware's decoder.
 
 Then the time to upload a 24 KB pattern (1.5 s at 8 kHz, int16: the pencil's) with
 :meth:`realpen.device.client.PenClient.upload` straight over the pseudo-terminal (BEGIN, 134
@@ -42,6 +45,7 @@ from pathlib import Path
 import numpy as np
 from websockets.sync.client import connect
 
+from realpen.device.sim import read_trace
 from realpen.profile import resolve_profile
 
 
@@ -65,14 +69,6 @@ def serve_sim(trace: str, store: str, home: str, ports) -> None:
         sock.close()
 
 
-def read_trace(path: Path) -> list[dict]:
-    events = []
-    for line in path.read_text().splitlines():
-        try:
-            events.append(json.loads(line))
-        except ValueError:
-            break
-    return events
 
 
 def percentiles(values_ns: list[int]) -> str:
@@ -145,13 +141,14 @@ def match(states: list[dict], down_sent: list[int], gain_sent: list[int],
           up_sent: list[int]) -> dict:
     """Each stroke's pen-down SET_STATE (playing, gain 0: the first after its pen_down and
     before its pen_up) and gain SET_STATE (playing, gain > 0: the first after its gain and
-    before the next stroke).
+    before the next stroke), in ns after the message was sent.
 
-    A SET_STATE decoded in the same player block as the next one is not in the trace (the
-    block applies the last); such strokes are counted as ``hidden`` and left out.
+    Stroke 0 is the warm-up: its pen-down delay is ``first`` (None when hidden) and its gain is
+    left out. A SET_STATE decoded in the same player block as the next one is not in the trace
+    (the block applies the last); such strokes are counted as ``hidden`` and left out.
     """
     times = np.asarray([e["t_ns"] for e in states], dtype=np.int64)
-    found = {"down": [], "gain": [], "hidden_down": 0, "hidden_gain": 0}
+    found = {"down": [], "gain": [], "hidden_down": 0, "hidden_gain": 0, "first": None}
     for k in range(len(down_sent)):
         after = down_sent[k + 1] if k + 1 < len(down_sent) else 2**62
         for kind, start, stop, wanted in (("down", down_sent[k], up_sent[k], True),
@@ -159,14 +156,16 @@ def match(states: list[dict], down_sent: list[int], gain_sent: list[int],
             lo, hi = np.searchsorted(times, [start, stop])
             hits = [e for e in states[lo:hi] if e["playing"] == 1 and
                     (e["gain"] == 0 if wanted else e["gain"] != 0)]
-            if hits:
-                found[kind].append(hits[0]["t_ns"] - start)
-            elif k:
+            delay = hits[0]["t_ns"] - start if hits else None
+            if k == 0:  # the warm-up: its own figure, never one of the strokes'
+                if kind == "down":
+                    found["first"] = delay
+            elif delay is not None:
+                found[kind].append(delay)
+            else:
                 found[f"hidden_{kind}"] += 1
     if not found["down"] or not found["gain"]:
         raise SystemExit("the trace has no SET_STATE of the strokes")
-    found["first"] = found["down"].pop(0) if len(found["down"]) > 0 else None
-    found["gain"] = found["gain"][1:]
     return found
 
 
@@ -205,15 +204,19 @@ def main(argv: list[str] | None = None) -> None:
     print(f"simulated pen: {info['name']} firmware {'.'.join(map(str, info['firmware']))}, "
           f"{info['sample_rate']} Hz, MicroPython Unix port on a pseudo-terminal")
     print(f"{args.strokes} strokes through the live server (WebSocket → bridge → pty → "
-          f"firmware), after a warm-up stroke:")
-    print(f"  pointer-down -> SET_STATE at the pen  {percentiles(figures['down'])}")
-    print(f"  gain         -> SET_STATE at the pen  {percentiles(figures['gain'])}")
+          f"firmware), after a warm-up stroke; the clock starts at the page's WebSocket send "
+          f"(a script, no browser):")
+    print(f"  page message (pen_down) → SET_STATE at the pen  {percentiles(figures['down'])}")
+    print(f"  page message (gain)     → SET_STATE at the pen  {percentiles(figures['gain'])}")
     hidden = figures["hidden_down"] + figures["hidden_gain"]
     if hidden:
         print(f"  ({figures['hidden_down']} pen-down and {figures['hidden_gain']} gain SET_STATEs "
               f"left out: decoded in the same 2 ms block as the next, the trace has only that)")
-    print(f"  the warm-up stroke, a new pen (24 KB upload, then SET_STATE): "
-          f"{figures['first'] / 1e6:.1f} ms")
+    first = figures["first"]
+    first_text = (f"{first / 1e6:.1f} ms" if first is not None
+                  else "not in the trace (decoded in the block of the next)")
+    print(f"  the warm-up stroke, a new pen: page message (pen_down) → SET_STATE at the pen "
+          f"behind the 24 KB upload: {first_text}")
     upload = upload_time(args.uploads)
     seconds = upload["seconds"]
     median = statistics.median(seconds)

@@ -554,6 +554,14 @@ CORPUS = [
     bad("device-sim-record-folder", "device sim --record folder --force", "folder"),
     bad("device-sim-trace-is-record", "device sim --record out.wav --trace out.wav", "out.wav"),
     bad("device-sim-trace-exists", "device sim --trace t.csv", "t.csv"),
+    # --record is written when the pen stops: a place that takes no file is refused at once
+    bad("device-sim-record-in-a-file", "device sim --record /etc/passwd/x.wav",
+        "/etc/passwd/x.wav"),
+    bad("device-sim-record-unwritable", "device sim --record /proc/x.wav", "/proc/x.wav"),
+    bad("device-sim-record-no-folder", "device sim --record nowhere/x.wav", "nowhere/x.wav"),
+    # a group option's value is no subcommand: the flag named is the subcommand's
+    bad("device-port-first-play-gain", "device --port /dev/null play --gain 2", "--gain"),
+    bad("device-port-first-ping-count", "device -p /dev/null ping -n 0", "--count"),
 ]
 
 

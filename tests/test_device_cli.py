@@ -86,8 +86,25 @@ def test_ping_and_monitor(sim):
     watched = run_cli("device", "monitor", "--seconds", "1.2", "--port", sim.port)
     assert watched.returncode == 0, watched.stderr
     assert watched.stdout.startswith("monitoring ")
-    assert len(re.findall(r" s  ping \d+\.\d\d ms", watched.stdout)) == 2
-    assert re.search(r"stopped after 1\.\d s: \d+ events?, 2 pings, round trip median", watched.stdout)
+    pings = len(re.findall(r" s  ping \d+\.\d\d ms", watched.stdout))
+    assert 1 <= pings <= 2, watched.stdout  # one a second, from the start (a loaded machine: 1)
+    summary = re.search(r"stopped after (\d+\.\d) s: \d+ events?, (\d+) pings?, round trip "
+                        r"median", watched.stdout)
+    assert summary and int(summary[2]) == pings, watched.stdout
+    assert 1.2 <= float(summary[1]) + 0.05 and float(summary[1]) < 3, watched.stdout
+
+
+def test_a_half_frame_left_in_the_pen_does_not_eat_the_hello(sim):
+    # An interrupted command (Ctrl-C in an upload) leaves the start of a frame in the pen's
+    # decoder; the next command's HELLO must still be heard.
+    fd = os.open(sim.port, os.O_RDWR | os.O_NOCTTY)
+    try:
+        os.write(fd, bytes(range(1, 41)))  # 40 bytes, no 0x00: a frame that never ends
+    finally:
+        os.close(fd)
+    done = run_cli("device", "--timeout", "1", "info", "--port", sim.port)
+    assert done.returncode == 0, done.stderr
+    assert "protocol: 1" in done.stdout
 
 
 def test_list_says_plainly_when_bluetooth_is_unavailable(monkeypatch):
@@ -140,7 +157,7 @@ def test_failures_are_one_line(tmp_path, monkeypatch):
         started = time.monotonic()
         assert_clean_failure(run_cli("device", "--timeout", "0.3", "stop", "--port", path),
                              f"{path}: no reply to HELLO within 0.3 s")
-        assert time.monotonic() - started < 2
+        assert time.monotonic() - started < 5  # 0.3 s and the command's own time: not stuck
     finally:
         os.close(master)
         os.close(slave)
@@ -183,3 +200,26 @@ def test_sim_prints_its_port_and_writes_the_wav_when_interrupted(tmp_path):
     samples, rate = sf.read(record, dtype="int16")
     assert rate == 8000 and (samples == (8000 * 32767) >> 15).sum() > 0.1 * 8000
     assert any(json.loads(line)["event"] == "set_state" for line in trace.read_text().splitlines())
+
+
+def test_sim_says_when_its_firmware_dies_and_still_writes_the_wav(tmp_path):
+    record = tmp_path / "pen.wav"
+    process = subprocess.Popen([sys.executable, "-m", "realpen", "device", "sim", "--record",
+                                str(record)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    try:
+        port = process.stdout.readline().split(": ", 1)[1].strip()
+        hint = process.stdout.readline()
+        assert f"--device serial:{port}" in hint and f"--port {port}" in hint, hint
+        children = open(f"/proc/{process.pid}/task/{process.pid}/children").read().split()
+        assert len(children) == 1  # the firmware (MicroPython)
+        os.kill(int(children[0]), signal.SIGKILL)  # it dies by itself, as far as sim knows
+        out, err = process.communicate(timeout=10)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert_clean_failure(subprocess.CompletedProcess([], process.returncode, out, err),
+                         f"{port}: the simulated pen's firmware exited by itself (code -9); "
+                         f"wrote {record}: ")
+    assert sf.info(str(record)).samplerate == 8000

@@ -17,6 +17,7 @@ import time
 import tty
 import warnings
 import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -162,7 +163,7 @@ def test_no_reply_within_the_timeout_names_the_port(silent_pty):
         start = time.monotonic()
         with pytest.raises(DeviceError, match=rf"^{path}: no reply to HELLO within 0.3 s"):
             client.hello()
-        assert time.monotonic() - start < 1.5
+        assert time.monotonic() - start < 5  # 0.3 s in fact: not stuck (slack for a loaded CI)
         # What the host sent is one HELLO frame of this host's version.
         frames = p.FrameDecoder().feed(os.read(master, 1000))
         assert [(t, pl) for t, _, pl in frames] == [(p.HELLO, p.pack_hello(p.PROTOCOL_VERSION))]
@@ -285,7 +286,7 @@ def test_hello_info_ping(pen):
         assert info.name and info.firmware_version.count(".") == 2
         assert "USB" in info.feature_names
         trips = [client.ping() for _ in range(5)]
-        assert all(0 < trip < 1.0 for trip, _ in trips)
+        assert all(0 < trip < client.timeout for trip, _ in trips)
         clocks = [device_us for _, device_us in trips]
         assert clocks == sorted(clocks) and clocks[-1] > clocks[0]  # the pen's µs clock runs
         assert client.sync() > 0 and client.decode_errors == 0
@@ -513,6 +514,19 @@ def test_upload_refuses_samples_that_are_no_pattern(pen):
                 client.upload(samples, 8000)
         with pytest.raises(ParameterError, match="pattern_id"):
             client.upload(tone(10), 8000, pattern_id=70000)
+
+
+def test_relative_paths_are_the_callers_not_the_firmwares(tmp_path, monkeypatch):
+    # The firmware runs in firmware/pico: a relative path must still mean the caller's folder.
+    monkeypatch.chdir(tmp_path)
+    with SimPen(trace=Path("t.jsonl"), record=Path("r.wav"), link=Path("pen")) as sim:
+        assert sim.port == str(tmp_path / "pen")
+        with PenClient(open_transport("pen")) as client:
+            assert client.hello().sample_rate == 8000
+    trace = (tmp_path / "t.jsonl").read_text().splitlines()
+    assert json.loads(trace[0])["event"] == "boot"
+    assert sf.info(str(tmp_path / "r.wav")).samplerate == 8000
+    assert not (tmp_path / "pen").exists()  # the link goes with the pen
 
 
 def test_events_from_a_rebooted_pen(tmp_path):

@@ -42,6 +42,7 @@ import pytest
 from live_support import CHROMIUM, CHROMIUM_ARGS, CHROMIUM_MISSING
 
 from realpen.device import protocol as P
+from realpen.device.sim import read_trace as trace_events
 
 ROOT = Path(__file__).resolve().parents[1]
 ARTIFACTS = ROOT / "test-artifacts"
@@ -416,15 +417,6 @@ def longest_chunk_run(frames) -> int:
     return longest
 
 
-def trace_events(path: Path) -> list[dict]:
-    """The firmware's trace so far (a last line still being written is left for later)."""
-    events = []
-    for line in path.read_text().splitlines():
-        try:
-            events.append(json.loads(line))
-        except ValueError:
-            break
-    return events
 
 
 def test_web_serial_drives_the_firmware(browser, server, tmp_path):

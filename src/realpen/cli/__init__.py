@@ -66,16 +66,20 @@ def sub_app(name: str, help: str) -> typer.Typer:
 def command_path(args: Sequence[str]) -> str:
     """The subcommand that ``args`` (the arguments after ``realpen``) runs, e.g. ``"sound loop"``.
 
-    Options are skipped; the walk stops at the first word that is not a subcommand (where a
-    group runs a default subcommand then, that one is the path's last word). Empty for the top
-    level.
+    Options are skipped, with the values of a group's options that take one
+    (``device --port /dev/ttyACM0 play``); the walk stops at the first word that is not a
+    subcommand (where a group runs a default subcommand then, that one is the path's last
+    word). Empty for the top level.
     """
     command = typer.main.get_command(app)
     path: list[str] = []
-    for token in args:
+    tokens = iter(args)
+    for token in tokens:
         if token == "--":
             break
         if token.startswith("-"):
+            for _ in range(_values_taken(command, token)):
+                next(tokens, None)
             continue
         commands = getattr(command, "commands", None)
         if not commands or token not in commands:
@@ -86,6 +90,17 @@ def command_path(args: Sequence[str]) -> str:
         command = commands[token]
         path.append(token)
     return " ".join(path)
+
+
+def _values_taken(command, token: str) -> int:
+    """How many of the next arguments are the value of ``command``'s option ``token`` (0 for
+    a flag, an unknown option, or ``--name=value``)."""
+    for param in getattr(command, "params", ()):
+        if token in (*getattr(param, "opts", ()), *getattr(param, "secondary_opts", ())):
+            if getattr(param, "is_flag", False) or getattr(param, "count", False):
+                return 0
+            return max(int(getattr(param, "nargs", 1)), 1)
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> None:

@@ -7,8 +7,11 @@ numpy and the simulated pen (:mod:`realpen.device`) are imported inside the comm
 from __future__ import annotations
 
 import contextlib
+import errno
+import os
 import signal
 import statistics
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -318,13 +321,18 @@ def sim(
     """Run the pen's real firmware on a pseudo-terminal, until Ctrl-C.
 
     The firmware runs under the MicroPython Unix port. The first line
-    printed is 'port: /dev/pts/N', the port the other device commands
-    (and 'realpen serve --device') take. Ctrl-C or SIGTERM stops it and
-    writes --record.
+    printed is 'port: /dev/pts/N': the other device commands take it as
+    --port, and 'realpen serve --device serial:/dev/pts/N' drives it from
+    the live page. Ctrl-C or SIGTERM stops it and writes --record.
     """
     if record is not None and record.suffix.lower() != ".wav":
         raise fail(record, "--record writes a WAV file; give a name ending in .wav")
     check_outputs(record, trace, force=force)
+    # --record is written when the pen stops: a place that takes no file must be refused now,
+    # not after the session it would have recorded.
+    for flag, path in (("--record", record), ("--trace", trace)):
+        if path is not None:
+            _check_writable_folder(flag, path)
     from realpen.device.sim import SimPen
 
     pen = SimPen(record=record, trace=trace)
@@ -339,7 +347,8 @@ def sim(
                 pen.start()
                 port = pen.port
                 print(f"port: {port}", flush=True)  # the line a script reads: first, whole
-                print(f"  the pen's firmware runs there; Ctrl-C stops it"
+                print(f"  the pen's firmware runs there ('realpen device --port {port} info'; "
+                      f"the live app: 'realpen serve --device serial:{port}'); Ctrl-C stops it"
                       f"{f' and writes {record}' if record else ''}", flush=True)
                 while pen.alive:
                     time.sleep(0.1)
@@ -347,11 +356,37 @@ def sim(
                 interrupted = True
     finally:
         pen.stop()  # also after a failure: the firmware never outlives the command
-    if not interrupted:
-        raise RealPenError(f"{port}: the simulated pen's firmware stopped by itself")
+    if not interrupted:  # it died (stop() has written the recording of what it played)
+        wrote = f"; {_wrote(record)}" if record is not None else ""
+        raise RealPenError(f"{port}: the simulated pen's firmware exited by itself (code "
+                           f"{pen.returncode}){wrote}")
     if record is not None:
-        import soundfile as sf
+        console.print(_wrote(record))
 
-        written = sf.info(str(record))
-        console.print(f"wrote {record}: {written.frames} samples at {written.samplerate} Hz "
-                      f"({written.frames / written.samplerate:.2f} s)")
+
+def _wrote(record: Path) -> str:
+    """What the WAV just written holds, in words."""
+    import soundfile as sf
+
+    written = sf.info(str(record))
+    return (f"wrote {record}: {written.frames} samples at {written.samplerate} Hz "
+            f"({written.frames / written.samplerate:.2f} s)")
+
+
+def _check_writable_folder(flag: str, path: Path) -> None:
+    """Refuse ``path`` unless its folder exists and takes a new file (one is made and removed).
+
+    Raises:
+        RealPenError: one line naming ``path`` and the folder.
+    """
+    folder = Path(os.path.abspath(path)).parent
+    if not folder.is_dir():
+        what = "does not exist" if not folder.exists() else "is not a folder"
+        raise fail(path, f"{flag}: {folder} {what}")
+    try:
+        handle, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    except OSError as error:  # /proc says ENOENT for a folder that is there: say it plainly
+        why = "it takes no new files" if error.errno == errno.ENOENT else error.strerror or error
+        raise fail(path, f"{flag}: cannot create a file in {folder} ({why})") from None
+    os.close(handle)
+    os.unlink(probe)

@@ -16,8 +16,9 @@ from realpen.io.paths import default_store
 TACTILE_CHOICES = ("audio", "none")
 DEVICE_WAIT_S = 3.0  # how long the summary waits for the pen's first connection attempt
 DEVICE_HELP = ("The pen's own device: sim (the simulated pen: the real firmware under the "
-               "MicroPython Unix port on a pseudo-terminal), serial:PORT (a pen on USB, e.g. "
-               "serial:/dev/ttyACM0) or ble:NAME (a pen over Bluetooth, by name or address). "
+               "MicroPython Unix port on a pseudo-terminal, restarted if it exits), serial:PORT "
+               "(a pen on USB, e.g. serial:/dev/ttyACM0; the port 'realpen device sim' prints "
+               "is serial:/dev/pts/N) or ble:NAME (a pen over Bluetooth, by name or address). "
                "Pen down/up and gain become the pen protocol's SET_STATE and a change of pen "
                "uploads its pattern; a pen that goes away is reconnected. Default: no pen, the "
                "commands are only logged (/api/device/log).")

@@ -13,13 +13,14 @@ only queues the command and returns (microseconds); a worker thread talks to the
   is lost): a slow link never builds a backlog;
 - ``pen_up(origin)``: ``SET_STATE(playing=0, gain=0)``.
 
-Commands keep their order. When the pen goes away (a write fails, a ``PING`` sent while idle gets
-no answer, or the pen reports a boot), the bridge says so in :meth:`PenBridge.status` and keeps
-trying, the wait doubling from 50 ms up to :data:`RETRY_MAX_S`; on reconnecting it says
-``HELLO`` again, uploads the current pattern again (a rebooted pen has lost it) and resends the
-current state, so a stroke that was down when the pen went away is felt again. Nothing the pen
-or the link does raises into the server: problems become the status message. The page's own
-sound never depends on the pen.
+Commands keep their order. When the pen goes away (a write fails, the port hangs up, the
+``PING`` sent after :data:`HEARTBEAT_S` idle gets no answer, or the pen reports a boot), the
+bridge says so in :meth:`PenBridge.status` and keeps trying, the wait doubling from 50 ms up
+to :data:`RETRY_MAX_S`; on reconnecting it says ``HELLO`` again, uploads the current pattern
+again (a rebooted pen has lost it) and resends the current state, so a stroke that was down
+when the pen went away is felt again. Nothing the pen or the link does raises into the server:
+problems become the status message (the history keeps its changes, not every failed attempt).
+The page's own sound never depends on the pen.
 
 The connection is made by a ``connect`` callable (:func:`port_connector` for a port), so the
 bridge can be tested with a fake client.
@@ -40,14 +41,17 @@ import numpy as np
 
 from realpen.device.protocol import EV_BOOT
 
-__all__ = ["PenBridge", "port_connector", "RETRY_MIN_S", "RETRY_MAX_S", "HEARTBEAT_S",
+__all__ = ["PenBridge", "port_connector", "RETRY_MIN_S", "RETRY_MAX_S", "HEARTBEAT_S", "LINK_CHECK_S",
            "CLOSE_WAIT_S", "gain_fraction", "fade_ms"]
 
 log = logging.getLogger(__name__)
 
 RETRY_MIN_S = 0.05  # first wait before reconnecting; doubles each failure
 RETRY_MAX_S = 1.0  # the longest wait between attempts: a pen back is found within a second
-HEARTBEAT_S = 0.25  # an idle link is PINGed this often, so a vanished pen is noticed unasked
+# An idle link is PINGed this often, so a vanished pen is noticed unasked (within this plus the
+# reply timeout). Not faster: each PING wakes a battery pen's radio over Bluetooth.
+HEARTBEAT_S = 1.0
+LINK_CHECK_S = 0.25  # an idle bridge looks this often whether its client saw the link go (no I/O)
 CLOSE_WAIT_S = 3.0  # how long close() waits for the worker to silence the pen and stop
 HISTORY = 20  # status changes kept for GET /api/device
 PATTERN_CACHE = 8  # rendered patterns kept (by profile version and rate)
@@ -192,6 +196,7 @@ class PenBridge:
         self._was_connected = False
         self._lost: str | None = None  # why the link went away (until it is back)
         self._hello_at = 0.0  # time.monotonic() when the last HELLO was answered
+        self._ping_at = 0.0  # time.monotonic() of the next idle PING
         self._worker = threading.Thread(target=self._run, name=f"pen-bridge {name}", daemon=True)
         self._worker.start()
 
@@ -275,10 +280,12 @@ class PenBridge:
 
     def _set_message(self, message: str, connected: bool | None = None) -> None:
         """Set the status (call with the condition's lock held)."""
+        changed = message != self._message or (connected is not None
+                                               and connected != self._connected)
         if connected is not None:
             self._connected = connected
-        if message != self._message or connected is not None:
-            self._message = message
+        self._message = message
+        if changed:  # a retry that fails as the last one did is no news for the history
             self._history.append({"t": time.time(), "connected": self._connected,
                                   "message": message})
 
@@ -305,15 +312,21 @@ class PenBridge:
                     continue
                 with self._cond:
                     if not self._ops and not self._closing:
-                        self._cond.wait(self._heartbeat_s)
+                        self._cond.wait(max(0.0, min(self._ping_at - time.monotonic(),
+                                                     LINK_CHECK_S)))
                     op = self._ops.popleft() if self._ops else None
                     closing = self._closing
                 if op is not None:
                     self._guard(self._apply, op)
+                    self._ping_at = time.monotonic() + self._heartbeat_s
                 elif closing:
                     break
-                else:
+                elif (time.monotonic() >= self._ping_at
+                      or not getattr(self._client, "connected", True)):
+                    # A link its client already knows is gone (the port hung up) fails the
+                    # heartbeat at once, with the client's reason.
                     self._guard(self._heartbeat)
+                    self._ping_at = time.monotonic() + self._heartbeat_s
         except Exception:  # a bug: said once, the server carries on without the pen
             log.exception("%s: the pen bridge stopped", self.name)
             self._status("stopped after an internal error (logged on the server)", False)
@@ -355,6 +368,7 @@ class PenBridge:
         # A boot EVENT received before INFO came is this boot's (a pen starting while the
         # HELLO waited); only a later one means the pen restarted since.
         self._hello_at = time.monotonic()
+        self._ping_at = self._hello_at + self._heartbeat_s
         rate = _info_field(info, "sample_rate")
         self._rate = int(rate) if rate else None
         self._held = None  # what a pen holds after a HELLO is unknown: upload again

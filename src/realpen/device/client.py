@@ -291,8 +291,10 @@ class PenClient:
         if self._closing.is_set():
             raise DeviceDisconnected(f"{self.name}: the connection is closed")
 
-    def _send(self, ftype: int, payload: bytes = b"", waiter: _Waiter | None = None) -> int:
-        """Write one frame (and register its waiter first, so no reply can come before)."""
+    def _send(self, ftype: int, payload: bytes = b"", waiter: _Waiter | None = None,
+              resync: bool = False) -> int:
+        """Write one frame (and register its waiter first, so no reply can come before);
+        ``resync``: a lone 0x00 first, which ends whatever frame the pen has half received."""
         self._check_link()
         # The reader takes only _lock: a write that blocks (the pen reading slowly) never
         # keeps it from handing replies over.
@@ -303,7 +305,8 @@ class PenClient:
                 if waiter is not None:
                     self._pending[seq] = waiter
             try:
-                self.transport.write(p.encode_frame(ftype, seq, payload))
+                frame = p.encode_frame(ftype, seq, payload)
+                self.transport.write(b"\x00" + frame if resync else frame)
             except DeviceError as error:
                 with self._lock:
                     self._pending.pop(seq, None)
@@ -357,7 +360,10 @@ class PenClient:
         with self._lock:
             self._stray_info.clear()
         waiter = _Waiter()
-        seq = self._send(p.HELLO, p.pack_hello(p.PROTOCOL_VERSION), waiter)
+        # A host that was interrupted mid-write (Ctrl-C in an upload) leaves a half frame in
+        # the pen's decoder, which would swallow this HELLO into one garbled frame: a 0x00
+        # first ends it (the pen drops it and ignores the empty frame).
+        seq = self._send(p.HELLO, p.pack_hello(p.PROTOCOL_VERSION), waiter, resync=True)
         ftype, payload = self._wait_reply(p.HELLO, seq, waiter)
         if ftype == p.NACK:
             refused, code = self._nack(payload, "HELLO")

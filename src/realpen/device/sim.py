@@ -27,6 +27,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -34,7 +35,7 @@ import numpy as np
 
 from realpen.errors import RealPenError
 
-__all__ = ["SimPen", "firmware_dir", "find_micropython"]
+__all__ = ["SimPen", "firmware_dir", "find_micropython", "read_trace"]
 
 _START_TIMEOUT_S = 10.0  # for the firmware's boot line: generous for a loaded CI machine
 _STOP_TIMEOUT_S = 5.0
@@ -91,7 +92,9 @@ class SimPen:
             one makes it refuse HELLO, as an old pen would.
         micropython: the MicroPython executable (None: found by :func:`find_micropython`).
 
-    Use as a context manager, or call :meth:`start` and :meth:`stop`.
+    Relative paths are taken from the working folder at construction (the firmware itself runs
+    in ``firmware/pico``). Use as a context manager, or call :meth:`start` and :meth:`stop`;
+    they and :meth:`restart` may be called from different threads.
     """
 
     def __init__(self, *, record: Path | None = None, trace: Path | None = None,
@@ -104,9 +107,11 @@ class SimPen:
                 or not 2 <= max_pattern_bytes <= 64 * 1024 * 1024):
             raise RealPenError(f"simulated pen: max_pattern_bytes must be an integer 2 … 64 MiB, "
                                f"got {max_pattern_bytes!r}")
-        self.record = None if record is None else Path(record)
-        self.trace = None if trace is None else Path(trace)
-        self.link = None if link is None else Path(link)
+        # Absolute now: the firmware runs in firmware/pico, and a relative path given by the
+        # caller means the caller's working folder (os.path.abspath: a link is not followed).
+        self.record = None if record is None else Path(os.path.abspath(record))
+        self.trace = None if trace is None else Path(os.path.abspath(trace))
+        self.link = None if link is None else Path(os.path.abspath(link))
         self.rate = rate
         self.max_pattern_bytes = max_pattern_bytes
         self.protocol_version = protocol_version
@@ -118,6 +123,10 @@ class SimPen:
         self._trace_path: Path | None = None
         self._stderr_path: Path | None = None
         self._trace_seen = 0  # bytes of the trace read while waiting for a boot line
+        self._returncode: int | None = None  # the firmware's exit code once it exited
+        # start/restart/stop may come from different threads (a live server's bridge restarts
+        # a dead firmware on its worker; the server's shutdown stops it).
+        self._lock = threading.RLock()
 
     # -- lifecycle --------------------------------------------------------------------------
 
@@ -147,7 +156,17 @@ class SimPen:
     @property
     def pid(self) -> int | None:
         """The firmware process's id while it runs."""
-        return self._process.pid if self.alive else None
+        process = self._process
+        return process.pid if process is not None and process.poll() is None else None
+
+    @property
+    def returncode(self) -> int | None:
+        """The firmware's exit code once it has exited by itself or been stopped (negative:
+        the signal that ended it), None while it runs or before it started."""
+        process = self._process
+        if process is not None:
+            return process.poll()
+        return self._returncode
 
     def start(self) -> SimPen:
         """Start the firmware (a fresh recording and trace) and wait until it has booted.
@@ -156,7 +175,11 @@ class SimPen:
             RealPenError: no MicroPython, no firmware, or the firmware did not start (its
                 error output is quoted).
         """
-        if self._process is not None:
+        with self._lock:
+            return self._start()
+
+    def _start(self) -> SimPen:
+        if self._process is not None or self._workdir is not None:
             raise RealPenError("simulated pen: already started")
         if os.name != "posix":
             raise RealPenError("simulated pen: needs a POSIX system (pseudo-terminals)")
@@ -194,26 +217,33 @@ class SimPen:
         It comes up on a new pseudo-terminal (a host's open port sees the pen go away); with
         ``link`` the symlink is repointed to it. The recording and the trace carry on.
         """
-        if self._process is None:
-            raise RealPenError("simulated pen: not started")
-        self._kill()
-        self._spawn()
+        with self._lock:
+            if self._workdir is None:  # a failed restart leaves no process: it may try again
+                raise RealPenError("simulated pen: not started")
+            self._kill()
+            self._spawn()
 
     def stop(self) -> None:
         """Stop the firmware (SIGINT: it closes its files) and write the WAV of what it played.
 
         Safe to call twice. Raises RealPenError if the WAV cannot be written.
         """
-        if self._process is None:
+        with self._lock:
+            self._stop()
+
+    def _stop(self) -> None:
+        if self._workdir is None:
             return
         process = self._process
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-            try:
-                process.wait(_STOP_TIMEOUT_S)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
+        if process is not None:
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+                try:
+                    process.wait(_STOP_TIMEOUT_S)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()
+            self._returncode = process.returncode
         self._process = None
         self._close_pty()
         if self.link is not None and self.link.is_symlink():
@@ -233,7 +263,7 @@ class SimPen:
         """The trace's events so far (the complete lines)."""
         if self._trace_path is None or not self._trace_path.exists():
             return []
-        return _read_trace(self._trace_path)
+        return read_trace(self._trace_path)
 
     # -- internals --------------------------------------------------------------------------
 
@@ -317,6 +347,7 @@ class SimPen:
             if self._process.poll() is None:
                 self._process.kill()
             self._process.wait()
+            self._returncode = self._process.returncode
             self._process = None
         self._close_pty(keep_path=True)
 
@@ -342,7 +373,14 @@ class SimPen:
             self._workdir = None
 
 
-def _read_trace(path: Path) -> list[dict]:
+def read_trace(path: Path) -> list[dict]:
+    """The events of a simulated pen's trace (JSON lines) so far; none while it has no file.
+
+    A last line the firmware is still writing is left for the next read, and a line cut short
+    by a killed firmware (a restart) is skipped.
+    """
+    if not Path(path).exists():
+        return []
     events = []
     with open(path, encoding="utf-8", errors="replace") as handle:
         for line in handle:

@@ -31,14 +31,15 @@ import itertools
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Literal, Protocol
 
-from realpen.errors import ParameterError
+from realpen.errors import ParameterError, RealPenError
 from realpen.profile.bundle import PenProfile
 
 __all__ = ["LOG_LIMIT", "DEVICE_KINDS", "Origin", "PenDevice", "DeviceCommand", "CommandLog",
-           "parse_device", "open_device", "device_status"]
+           "parse_device", "open_device", "sim_connector", "device_status"]
 
 LOG_LIMIT = 100_000  # entries kept; older ones are dropped (their indices stay counted)
 DEVICE_KINDS = ("sim", "serial", "ble")
@@ -195,7 +196,8 @@ def open_device(spec: str | None, *, trace=None, record=None) -> PenDevice:
     pseudo-terminal), ``"serial:PORT"`` and ``"ble:NAME"`` connect to a real pen; each gives a
     :class:`~realpen.device.bridge.PenBridge`, which connects on its own thread and keeps
     trying: a pen that is not there yet is not an error (this returns at once, after starting
-    the simulated pen's firmware for ``"sim"``).
+    the simulated pen's firmware for ``"sim"``, which is started again if it exits:
+    :func:`sim_connector`).
 
     Args:
         spec: the device string, or None.
@@ -218,13 +220,36 @@ def open_device(spec: str | None, *, trace=None, record=None) -> PenDevice:
 
     sim = SimPen(trace=trace, record=record).start()
     try:
-        bridge = PenBridge(port_connector(lambda: sim.port), name="sim", kind="sim",
-                           log=CommandLog(), on_close=[sim.stop])
+        bridge = PenBridge(sim_connector(sim, port_connector(lambda: sim.port)), name="sim",
+                           kind="sim", log=CommandLog(), on_close=[sim.stop])
     except BaseException:
         sim.stop()
         raise
     bridge.sim = sim  # so a test (or a caller) can reboot the simulated pen
     return bridge
+
+
+def sim_connector(sim, connect: Callable[[], object]) -> Callable[[], object]:
+    """A ``connect`` for the simulated pen that brings its firmware back when it died.
+
+    A real pen that crashes reboots by itself; the simulated one's process just exits, and its
+    pseudo-terminal vanishes with it. So an attempt that finds the firmware dead restarts it
+    (:meth:`realpen.device.sim.SimPen.restart`) and fails once with a line that says so (the
+    bridge shows it and tries again, within its shortest wait); otherwise it is ``connect()``.
+
+    Args:
+        sim: a started :class:`realpen.device.sim.SimPen`.
+        connect: what opens a client on the simulated pen's current port.
+    """
+
+    def connect_sim():
+        if not sim.alive:
+            code = sim.returncode
+            sim.restart()  # a RealPenError (it did not boot) becomes the status, tried again
+            raise RealPenError(f"the simulated pen's firmware exited (code {code}); restarted")
+        return connect()
+
+    return connect_sim
 
 
 def device_status(device: PenDevice) -> dict:
