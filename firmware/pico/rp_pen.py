@@ -54,6 +54,17 @@ UNDERRUN_EVERY_MS = 250  # at most four underrun EVENTs a second
 BATTERY_EVERY_MS = 60000  # battery EVENT once a minute
 
 
+# What the pen accepts from a host, and how each payload is read.
+_UNPACK = {
+    P.SET_STATE: P.unpack_set_state,
+    P.PATTERN_CHUNK: P.unpack_pattern_chunk,
+    P.PING: P.unpack_ping,
+    P.HELLO: P.unpack_hello,
+    P.PATTERN_BEGIN: P.unpack_pattern_begin,
+    P.PATTERN_COMMIT: P.unpack_pattern_commit,
+}
+
+
 class Link:
     """One byte stream to a host (USB, BLE, a pseudo-terminal): its own frame decoder and a
     ``send(data)`` function the pen writes replies and events with."""
@@ -185,22 +196,12 @@ class Pen:
 
     def handle(self, link, ftype, seq, payload):
         """Act on one decoded frame from ``link`` and send its reply, if it has one."""
+        unpack = _UNPACK.get(ftype)
+        if unpack is None:
+            self._nack(link, ftype, seq, P.E_UNKNOWN_TYPE)
+            return
         try:
-            if ftype == P.SET_STATE:
-                fields = P.unpack_set_state(payload)
-            elif ftype == P.PATTERN_CHUNK:
-                fields = P.unpack_pattern_chunk(payload)
-            elif ftype == P.PING:
-                fields = P.unpack_ping(payload)
-            elif ftype == P.HELLO:
-                fields = P.unpack_hello(payload)
-            elif ftype == P.PATTERN_BEGIN:
-                fields = P.unpack_pattern_begin(payload)
-            elif ftype == P.PATTERN_COMMIT:
-                fields = P.unpack_pattern_commit(payload)
-            else:
-                self._nack(link, ftype, seq, P.E_UNKNOWN_TYPE)
-                return
+            fields = unpack(payload)
         except ValueError:
             self._nack(link, ftype, seq, P.E_BAD_LENGTH)
             if ftype == P.PATTERN_CHUNK or ftype == P.PATTERN_COMMIT:
