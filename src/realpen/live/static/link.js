@@ -48,7 +48,7 @@ export class Link {
 
   /** What a previous load of this page in this tab left: its id, strokes and unsent messages. */
   restore() {
-    let saved = null;
+    let saved;
     try { saved = JSON.parse(sessionStorage.getItem(SAVED)); } catch { saved = null; }
     if (!saved || typeof saved.page !== 'string') return;
     this.page = saved.page;

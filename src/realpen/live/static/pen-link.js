@@ -1,5 +1,7 @@
-// A pen driven straight from the page, over Web Serial (USB) or Web Bluetooth, with the codec of
-// pen-protocol.js: for a lab where the pen is next to the tablet and the server is not.
+// @ts-check
+// A pen driven straight from the page, over Web Serial (USB, pen-transport-serial.js) or Web
+// Bluetooth (pen-transport-ble.js), with the codec of pen-protocol.js: for a lab where the pen
+// is next to the tablet and the server is not.
 //
 //   connect → HELLO / INFO (over Bluetooth the INFO characteristic is read instead): a pen that
 //   speaks another protocol version is refused with one clear line
@@ -17,300 +19,145 @@
 // answering) and gets its pattern and state again, as after the pen's boot EVENT (a pen that
 // restarted behind a port that stayed).
 //
-// Bluetooth: RX is written without response, a frame per write (a frame is at most ~192 bytes:
-// one write at the ATT MTU of 247 the firmware asks for). The page cannot see the MTU Chrome
-// negotiated: when a write fails twice the link goes on in smaller pieces (BLE_PIECES), which
-// the pen's decoder joins again, as it joins TX notifications, pieces of the same byte stream as
-// USB, here. Writes without response have no flow control: an upload waits for a PONG every
-// few chunks so that it never runs further ahead of the pen than the pen's buffer holds.
+// Timers run only while a pen is connected: the state refresh and the heartbeat start when a
+// transport opens and stop when it is lost or let go of; the reconnect loop's waits end at
+// disconnect() and close(). A link nobody connected, or one disconnected, holds no timer.
 
 import {
-  ACK, BLE_INFO, BLE_RX, BLE_SERVICE, BLE_TX, E_BAD_FORMAT, E_BAD_RATE, E_TOO_LARGE, E_VERSION,
-  EV_BATTERY, EV_BOOT, EV_UNDERRUN, EVENT,
+  ACK, E_BAD_FORMAT, E_BAD_RATE, E_TOO_LARGE, E_VERSION, EV_BATTERY, EV_BOOT, EV_UNDERRUN, EVENT,
   FORMAT_S16LE, FrameDecoder, GAIN_ONE, HELLO, INFO, MAX_CHUNK, NACK, NACK_TEXT, PATTERN_BEGIN,
   PATTERN_CHUNK, PATTERN_COMMIT, PING, PONG, PROTOCOL_VERSION, RATE_ONE, SET_STATE, crc32,
   encodeFrame, packHello, packPatternBegin, packPatternChunk, packPatternCommit, packPing,
   packSetState, unpackAck, unpackEvent, unpackInfo, unpackNack, unpackPong,
 } from './pen-protocol.js';
+import { PenError, describe } from './pen-transport.js';
+import { chooseBluetoothPen, hasBluetooth } from './pen-transport-ble.js';
+import { SerialTransport, chooseSerialPort, hasSerial, watchPorts } from './pen-transport-serial.js';
 
-export const BAUD_RATE = 115200;
-// Bytes per RX write: 244 is one write at ATT MTU 247; 182 at the MTU of 185 some hosts
-// (macOS, iOS) settle on; 20 at the minimum MTU of 23.
-export const BLE_PIECES = [244, 182, 20];
 const REPLY_MS = 1000; // a request's reply (INFO, ACK, PONG) must come within this
 const COMMIT_MS = 3000; // the pen checks the CRC-32 of the whole pattern before it answers
 const HELLO_TRIES = 3; // a pen that has just booted may miss the first HELLO
 const REFRESH_MS = 1000; // the current state goes again this often (SET_STATE is unanswered)…
 const REFRESH_FOR_MS = 3000; // …while the pen plays and for this long after the last change
 const RETRY_MAX_MS = 1000; // reconnect backoff ceiling
-// Pattern chunks an upload sends before it waits for the pen (a PING answered), as the Python
-// host does (realpen.device.transport UPLOAD_WINDOW, BLE_UPLOAD_WINDOW): ≈ 2.9 KB over USB;
-// over Bluetooth 4 (≈ 760 B): the Pico W's receive buffer holds 4 KB and drains slowly.
-const UPLOAD_WINDOW = 16;
-const BLE_UPLOAD_WINDOW = 4;
 const UPLOAD_TRIES = 2; // a failed upload is tried once more (not when the pen refused the pattern)
 const HEARTBEAT_MS = 2000; // an idle link PINGs this often…
 const HEARTBEAT_MISSES = 2; // …and a pen that misses this many PONGs in a row has hung
-const WRITE_RETRY_MS = 20; // a failed Bluetooth write goes again after this
 const CLOSE_WAIT_MS = 1000; // a hung pen's port may take long to close: reopen after this at most
 
-const hasSerial = () => typeof navigator !== 'undefined' && 'serial' in navigator;
-const hasBluetooth = () => typeof navigator !== 'undefined' && 'bluetooth' in navigator;
+/** @typedef {import('./pen-transport-serial.js').SerialTransport} SerialLink */
+/** @typedef {import('./pen-transport-ble.js').BleTransport} BleLink */
+/** @typedef {SerialLink | BleLink} Transport a byte pipe to the pen; `kind` tells which */
+/** @typedef {import('./pen-protocol.js').Frame} Frame */
 
-/** What this browser can do: { serial, bluetooth } (Chrome and Edge on a computer have both;
- *  Safari and Firefox have neither). */
+/**
+ * The pen's INFO, as the link reports it.
+ * @typedef {object} PenInfo
+ * @property {number} protocol the protocol version the pen speaks
+ * @property {string} firmware "major.minor.patch"
+ * @property {number} sampleRate Hz of the pen's player: patterns are uploaded at this rate
+ * @property {number} maxPatternBytes the largest pattern the pen holds, bytes
+ * @property {number} features FEATURE_* bits
+ * @property {string} name the pen's name (UTF-8, at most MAX_NAME bytes)
+ */
+
+/**
+ * What the link shows: one object, replaced field by field.
+ * @typedef {object} PenStatus
+ * @property {'idle' | 'connecting' | 'connected' | 'uploading' | 'disconnected' | 'error'} state
+ * @property {'usb' | 'ble' | null} kind
+ * @property {string} message one line for the panel
+ * @property {PenInfo | null} info the pen's INFO, or null until it said HELLO
+ * @property {string | null} pattern the pen name whose pattern the pen holds
+ * @property {number | null} progress 0-1 of an upload under way
+ * @property {number | null} battery % from the Bluetooth Battery service
+ * @property {number | null} batteryMv mV from the pen's battery EVENT
+ * @property {number} sent SET_STATE frames written
+ * @property {number} errors frames the decoder dropped
+ * @property {number} underruns the pen's underrun count, from its EVENTs
+ */
+
+/**
+ * A request waiting for its reply.
+ * @typedef {object} Pending
+ * @property {(frame: Frame) => void} resolve
+ * @property {(error: Error) => void} reject
+ * @property {number | undefined} timer
+ */
+
+/** @typedef {[playing: number, gain: number, rate: number, fadeMs: number]} StateFrame */
+
+/**
+ * What this browser can do (Chrome and Edge on a computer have both; Safari and Firefox have
+ * neither).
+ * @returns {{ serial: boolean, bluetooth: boolean }}
+ */
 export function support() {
   return { serial: hasSerial(), bluetooth: hasBluetooth() };
 }
-
-function describe(error) {
-  if (!error) return 'unknown error';
-  return error.message ? String(error.message) : String(error);
-}
-
-/** The user closed the browser's chooser (NotFoundError is also "no adapter", which is said). */
-const cancelled = (error) => Boolean(error && error.name === 'NotFoundError'
-  && /cancel|no port selected/i.test(error.message || ''));
-
-const hex4 = (n) => n.toString(16).padStart(4, '0');
-const sleep = (ms) => new Promise((resolve) => { setTimeout(resolve, ms); });
-
-/** A failure the user should read as it is (no "Error:" prefix, no stack). */
-class PenError extends Error {}
-
-// ---- transports: a byte pipe each --------------------------------------------------------
-
-/** A serial port opened at 115200 8N1: `write(bytes)`, `close()`; the reader loop hands
- *  every chunk to `onData` and calls `onClose(reason)` once when the port goes away. */
-class SerialTransport {
-  constructor(port) {
-    this.port = port;
-    this.kind = 'usb';
-    this.closed = false;
-  }
-
-  async open(onData, onClose) {
-    this.onData = onData;
-    this.onClose = onClose;
-    await this.port.open({ baudRate: BAUD_RATE, dataBits: 8, stopBits: 1, parity: 'none',
-      flowControl: 'none' });
-    this.writer = this.port.writable.getWriter();
-    this.reading = this.readLoop();
-  }
-
-  async readLoop() {
-    let reason = 'the port closed';
-    let stream = this.port.readable;
-    while (!this.closed && stream) {
-      reason = 'the port closed';
-      this.reader = stream.getReader();
-      try {
-        for (;;) {
-          const { value, done } = await this.reader.read();
-          if (done) break;
-          if (value && value.length) this.onData(value);
-        }
-      } catch (error) {
-        // A recoverable read error (framing, parity, break, buffer overrun) ends this stream
-        // only: the port hands out a new one and reading goes on. A lost device leaves none.
-        reason = describe(error);
-      } finally {
-        this.reader.releaseLock();
-      }
-      const next = this.port.readable;
-      stream = next === stream ? null : next; // the same stream again has ended for good
-    }
-    this.lost(reason);
-  }
-
-  lost(reason) {
-    if (this.closed) return;
-    this.closed = true;
-    this.onClose(reason);
-  }
-
-  async write(bytes) {
-    if (this.closed) throw new PenError('the port is closed');
-    await this.writer.write(bytes);
-  }
-
-  async close() {
-    this.closed = true;
-    try { if (this.reader) await this.reader.cancel(); } catch { /* already gone */ }
-    try { await this.reading; } catch { /* already reported */ }
-    try { this.writer.releaseLock(); } catch { /* already released */ }
-    try { await this.port.close(); } catch { /* already closed */ }
-  }
-
-  get label() {
-    const info = this.port.getInfo ? this.port.getInfo() : {};
-    return info.usbVendorId !== undefined
-      ? `USB ${hex4(info.usbVendorId)}:${hex4(info.usbProductId || 0)}`
-      : 'USB serial';
-  }
-}
-
-/** The pen's GATT service: RX written without response, TX notifications into `onData`,
- *  INFO read; `onClose(reason)` when the device disconnects. */
-class BleTransport {
-  constructor(device) {
-    this.device = device;
-    this.kind = 'ble';
-    this.closed = false;
-    this.piece = 0; // index into BLE_PIECES
-    this.queue = Promise.resolve();
-    this.disconnected = () => this.lost('Bluetooth connection lost');
-    this.notified = (event) => {
-      const v = event.target.value;
-      this.onData(new Uint8Array(v.buffer, v.byteOffset, v.byteLength));
-    };
-  }
-
-  async open(onData, onClose) {
-    this.onData = onData;
-    this.onClose = onClose;
-    this.closed = false;
-    this.device.addEventListener('gattserverdisconnected', this.disconnected);
-    const server = await this.device.gatt.connect();
-    const service = await server.getPrimaryService(BLE_SERVICE);
-    this.rx = await service.getCharacteristic(BLE_RX);
-    this.tx = await service.getCharacteristic(BLE_TX);
-    this.info = await service.getCharacteristic(BLE_INFO);
-    this.tx.addEventListener('characteristicvaluechanged', this.notified);
-    await this.tx.startNotifications();
-    this.battery = await this.readBattery(server);
-  }
-
-  /** The standard Battery Level (%), or null when the pen has no battery service. */
-  async readBattery(server) {
-    try {
-      const service = await server.getPrimaryService('battery_service');
-      const level = await (await service.getCharacteristic('battery_level')).readValue();
-      return level.getUint8(0);
-    } catch { return null; }
-  }
-
-  async readInfo() {
-    const value = await this.info.readValue();
-    return new Uint8Array(value.buffer, value.byteOffset, value.byteLength);
-  }
-
-  lost(reason) {
-    if (this.closed) return;
-    this.closed = true;
-    this.detach();
-    this.onClose(reason);
-  }
-
-  detach() {
-    this.device.removeEventListener('gattserverdisconnected', this.disconnected);
-    if (this.tx) this.tx.removeEventListener('characteristicvaluechanged', this.notified);
-  }
-
-  /** Writes go one after another (a GATT operation at a time), each in pieces. */
-  write(bytes) {
-    const run = this.queue.then(() => this.writePieces(bytes));
-    this.queue = run.catch(() => {});
-    return run;
-  }
-
-  async writePieces(bytes) {
-    let at = 0;
-    let failed = 0; // failures of this piece at this size
-    while (at < bytes.length) {
-      if (this.closed) throw new PenError('the pen disconnected');
-      const piece = bytes.subarray(at, at + BLE_PIECES[this.piece]);
-      try {
-        await this.rx.writeValueWithoutResponse(piece);
-      } catch (error) {
-        if (this.closed || !this.device.gatt.connected) throw error;
-        failed += 1;
-        // A write fails for passing reasons too ("GATT operation already in progress", a busy
-        // controller): the same piece goes once more before the size is blamed.
-        if (failed === 1) {
-          await sleep(WRITE_RETRY_MS);
-          continue;
-        }
-        // Failed twice: longer than the ATT MTU allows, if a smaller piece would be shorter;
-        // the link goes on in smaller pieces for good.
-        const smaller = BLE_PIECES[this.piece + 1];
-        if (smaller !== undefined && piece.length > smaller) {
-          this.piece += 1;
-          failed = 0;
-          continue;
-        }
-        throw error;
-      }
-      failed = 0;
-      at += piece.length;
-    }
-  }
-
-  async close() {
-    this.closed = true;
-    this.detach();
-    try { if (this.tx) await this.tx.stopNotifications(); } catch { /* already gone */ }
-    try { if (this.device.gatt.connected) this.device.gatt.disconnect(); } catch { /* gone */ }
-  }
-
-  get label() {
-    return 'Bluetooth';
-  }
-}
-
-// ---- the link ---------------------------------------------------------------------------------
 
 /**
  * The page's direct link to a pen.
  *
  * options.fetchPattern(name, rate) → ArrayBuffer of int16 LE samples at `rate` Hz (the page's
- * GET /api/pens/{name}/pen-pattern); options.onChange(status) whenever the status changes.
- *
- * status: { state: 'idle' | 'connecting' | 'connected' | 'uploading' | 'disconnected' |
- * 'error', kind: 'usb' | 'ble' | null, message (one line for the panel), info (the pen's INFO
- * as an object, or null), pattern (the pen name whose pattern the pen holds), progress (0-1 of
- * an upload), battery (% from the Bluetooth Battery service, or null), batteryMv (mV from the
- * pen's battery EVENT, or null), sent (SET_STATE frames written), errors (frames the decoder
- * dropped), underruns (the pen's underrun count, from its EVENTs) }.
+ * GET /api/pens/{name}/pen-pattern); options.onChange(status) whenever the status changes
+ * (see PenStatus).
  *
  * heartbeatMs (default HEARTBEAT_MS) is how often an idle link PINGs; a change takes effect
  * from the next beat, or at once after scheduleBeat().
  */
 export class PenLink {
+  /**
+   * @param {{ fetchPattern?: (name: string, rate: number) => Promise<ArrayBuffer>,
+   *   onChange?: (status: PenStatus) => void }} [options]
+   */
   constructor({ fetchPattern, onChange = () => {} } = {}) {
     this.fetchPattern = fetchPattern;
     this.onChange = onChange;
+    /** @type {Transport | null} the open link, once it opened */
     this.transport = null;
+    /** @type {Transport | null} the last transport started (the port that may come back) */
+    this.lastTransport = null;
     this.decoder = new FrameDecoder();
     this.seq = 0;
-    this.pending = new Map(); // seq → { resolve, reject, timer }
+    /** @type {Map<number, Pending>} seq → the request waiting for its reply */
+    this.pending = new Map();
     this.wanted = { playing: false, gain: 0, fadeMs: 5 };
     this.changedAt = 0;
+    /** @type {StateFrame | null} */
     this.sentState = null;
-    this.stateBusy = null; // the generation whose SET_STATE write is under way
+    /** @type {number | null} the generation whose SET_STATE write is under way */
+    this.stateBusy = null;
     this.stateDirty = false;
-    this.chunkRefused = null; // the NACK code of a refused PATTERN_CHUNK of this upload
-    this.reconnecting = null; // the token of the reconnect loop under way
+    /** @type {number | null} the NACK code of a refused PATTERN_CHUNK of this upload */
+    this.chunkRefused = null;
+    /** @type {object | null} the token of the reconnect loop under way */
+    this.reconnecting = null;
     this.heartbeatMs = HEARTBEAT_MS;
     this.missed = 0; // PONGs missed in a row
-    this.pen = null; // the page's pen (profile name)
-    this.holds = null; // `${pen}@${rate}#${crc32}` of the pattern the pen holds
+    /** @type {string | null} the page's pen (profile name) */
+    this.pen = null;
+    /** @type {string | null} `${pen}@${rate}#${crc32}` of the pattern the pen holds */
+    this.holds = null;
+    /** @type {string | null} the pen whose pattern is being uploaded */
     this.uploading = null;
+    this.uploadAgain = false;
     this.userClosed = true;
     this.generation = 0; // bumps with each connection: stale async work gives up
+    /** @type {PenStatus} */
     this.status = { state: 'idle', kind: null, message: 'No pen connected.', info: null,
       pattern: null, progress: null, battery: null, batteryMv: null, sent: 0, errors: 0,
       underruns: 0 };
-    this.refresh = setInterval(() => {
-      const recent = performance.now() - this.changedAt < REFRESH_FOR_MS;
-      if (this.wanted.playing || recent) this.sendState(true);
-    }, REFRESH_MS);
-    this.scheduleBeat();
-    if (hasSerial()) {
-      navigator.serial.addEventListener('connect', (event) => this.portBack(event.target));
-    }
+    /** @type {number | null} the state refresh (setInterval), while a pen is connected */
+    this.refresh = null;
+    /** @type {number | null} the next heartbeat (setTimeout), while a pen is connected */
+    this.heartbeat = null;
+    /** @type {Set<() => void>} what ends each wait of the reconnect loop */
+    this.pauses = new Set();
+    this.unwatch = watchPorts((port) => this.portBack(port));
   }
 
+  /** @param {Partial<PenStatus>} fields */
   update(fields) {
     Object.assign(this.status, fields);
     this.onChange(this.status);
@@ -320,36 +167,65 @@ export class PenLink {
     return this.status.state === 'connected' || this.status.state === 'uploading';
   }
 
+  // ---- timers ----
+
+  /** The state refresh and the heartbeat: they run while a transport is open. */
+  startTimers() {
+    if (this.refresh === null) {
+      this.refresh = setInterval(() => {
+        const recent = performance.now() - this.changedAt < REFRESH_FOR_MS;
+        if (this.wanted.playing || recent) this.sendState(true);
+      }, REFRESH_MS);
+    }
+    this.scheduleBeat();
+  }
+
+  stopTimers() {
+    if (this.refresh !== null) clearInterval(this.refresh);
+    if (this.heartbeat !== null) clearTimeout(this.heartbeat);
+    this.refresh = null;
+    this.heartbeat = null;
+  }
+
+  /**
+   * A wait that disconnect() and close() cut short, so that no timer outlives the link.
+   * @param {number} ms
+   * @returns {Promise<void>}
+   */
+  pause(ms) {
+    return new Promise((resolve) => {
+      const end = () => {
+        clearTimeout(timer);
+        this.pauses.delete(end);
+        resolve();
+      };
+      const timer = setTimeout(end, ms);
+      this.pauses.add(end);
+    });
+  }
+
+  /** End every wait of the reconnect loop now (it then finds it has nothing to do). */
+  endPauses() {
+    for (const end of [...this.pauses]) end();
+  }
+
   // ---- connecting ----
 
-  /** Ask for a serial port (the browser's chooser; call from a click) and connect to it. */
+  /** Ask for a serial port (the browser's chooser; call from a click) and connect to it.
+   *  @returns {Promise<boolean>} false when the user closed the chooser */
   async connectSerial() {
-    if (!hasSerial()) throw new PenError('This browser has no Web Serial.');
-    let port;
-    try {
-      port = await navigator.serial.requestPort();
-    } catch (error) {
-      if (cancelled(error)) return false;
-      throw error;
-    }
-    await this.start(new SerialTransport(port));
+    const transport = await chooseSerialPort();
+    if (!transport) return false;
+    await this.start(transport);
     return true;
   }
 
-  /** Ask for a pen over Bluetooth (the browser's chooser; call from a click) and connect. */
+  /** Ask for a pen over Bluetooth (the browser's chooser; call from a click) and connect.
+   *  @returns {Promise<boolean>} false when the user closed the chooser */
   async connectBluetooth() {
-    if (!hasBluetooth()) throw new PenError('This browser has no Web Bluetooth.');
-    let device;
-    try {
-      device = await navigator.bluetooth.requestDevice({
-        filters: [{ services: [BLE_SERVICE] }],
-        optionalServices: ['battery_service', 'device_information'],
-      });
-    } catch (error) {
-      if (cancelled(error)) return false;
-      throw error;
-    }
-    await this.start(new BleTransport(device));
+    const transport = await chooseBluetoothPen();
+    if (!transport) return false;
+    await this.start(transport);
     return true;
   }
 
@@ -357,6 +233,7 @@ export class PenLink {
   async disconnect() {
     this.userClosed = true;
     this.reconnecting = null;
+    this.endPauses();
     const transport = this.transport;
     this.generation += 1;
     if (transport && this.connected) {
@@ -366,15 +243,26 @@ export class PenLink {
       } catch { /* gone already */ }
     }
     this.transport = null;
+    this.stopTimers();
     this.failPending('disconnected');
     if (transport) await transport.close();
     this.update({ state: 'idle', kind: null, message: 'No pen connected.', info: null,
       pattern: null, progress: null, battery: null, batteryMv: null });
   }
 
+  /** Done with the link for good (the page goes away, a test): let go of the pen and stop
+   *  listening for serial ports; no timer nor listener stays behind. */
+  async close() {
+    this.unwatch();
+    this.unwatch = () => {};
+    await this.disconnect();
+  }
+
+  /** @param {Transport} transport a transport not yet open */
   async start(transport) {
     if (this.transport) await this.disconnect();
     this.reconnecting = null;
+    this.endPauses();
     this.userClosed = false;
     this.lastTransport = transport;
     this.update({ state: 'connecting', kind: transport.kind, info: null, pattern: null,
@@ -382,9 +270,13 @@ export class PenLink {
     await this.open(transport);
   }
 
-  /** Open `transport`, say hello, send the state, upload. Failures become the status (while
-   *  `retrying` — the reason the pen was lost — it stays "disconnected, reconnecting").
-   *  Resolves to whether the pen is connected. */
+  /**
+   * Open `transport`, say hello, send the state, upload. Failures become the status (while
+   * `retrying` — the reason the pen was lost — it stays "disconnected, reconnecting").
+   * @param {Transport} transport
+   * @param {string | null} [retrying]
+   * @returns {Promise<boolean>} whether the pen is connected
+   */
   async open(transport, retrying = null) {
     const generation = ++this.generation;
     this.decoder = new FrameDecoder();
@@ -401,6 +293,7 @@ export class PenLink {
         return false;
       }
       this.transport = transport;
+      this.startTimers();
       const info = await this.hello(transport);
       if (generation !== this.generation) return false;
       this.update({ state: 'connected', info, pattern: null, battery: transport.battery ?? null,
@@ -413,6 +306,7 @@ export class PenLink {
       const versionProblem = error instanceof PenError && error.version;
       if (versionProblem) this.userClosed = true; // reconnecting cannot mend it
       this.transport = null;
+      this.stopTimers();
       this.failPending(describe(error));
       await transport.close();
       if (retrying && !versionProblem) {
@@ -425,12 +319,20 @@ export class PenLink {
     }
   }
 
+  /**
+   * @param {PenInfo} info
+   * @param {Transport} transport
+   */
   describePen(info, transport) {
     const khz = (info.sampleRate / 1000).toFixed(info.sampleRate % 1000 ? 1 : 0);
     return `${info.name || 'Pen'} on ${transport.label} `
       + `(firmware ${info.firmware}, ${khz}\u00a0kHz)`;
   }
 
+  /**
+   * @param {string} reason
+   * @param {string} [detail]
+   */
   lostMessage(reason, detail = '') {
     let next = '';
     if (!this.userClosed) {
@@ -441,7 +343,11 @@ export class PenLink {
     return `${text}${text.endsWith('…') ? '' : '.'} The page's own sound goes on.`;
   }
 
-  /** HELLO → INFO (USB), or the INFO characteristic (Bluetooth); checks the version. */
+  /**
+   * HELLO → INFO (USB), or the INFO characteristic (Bluetooth); checks the version.
+   * @param {Transport} transport
+   * @returns {Promise<PenInfo>}
+   */
   async hello(transport) {
     let raw;
     if (transport.kind === 'ble') {
@@ -450,6 +356,7 @@ export class PenLink {
       // A lone delimiter ends whatever partial frame the pen holds (a half-written frame
       // from before, a terminal's keystrokes) so that HELLO is decoded on its own.
       await transport.write(Uint8Array.of(0));
+      /** @type {Frame | null} */
       let reply = null;
       for (let attempt = 1; reply === null; attempt += 1) {
         try {
@@ -465,12 +372,11 @@ export class PenLink {
       const [ftype, , payload] = reply;
       if (ftype === NACK) {
         const [, code] = unpackNack(payload);
-        const problem = new PenError(code === E_VERSION
+        throw new PenError(code === E_VERSION
           ? `This pen does not speak protocol ${PROTOCOL_VERSION}, which this page speaks: `
             + 'update the pen\'s firmware (or the page) so both match.'
-          : `The pen refused HELLO: ${NACK_TEXT[code] || `error ${code}`}.`);
-        problem.version = code === E_VERSION;
-        throw problem;
+          : `The pen refused HELLO: ${NACK_TEXT[code] || `error ${code}`}.`,
+        { version: code === E_VERSION });
       }
       if (ftype !== INFO) throw new PenError(`The pen answered HELLO with frame type ${ftype}.`);
       raw = payload;
@@ -478,25 +384,32 @@ export class PenLink {
     const [protocol, major, minor, patch, sampleRate, maxPatternBytes, features, name] =
       unpackInfo(raw);
     if (protocol !== PROTOCOL_VERSION) {
-      const problem = new PenError(`This pen speaks protocol ${protocol}; this page speaks `
+      throw new PenError(`This pen speaks protocol ${protocol}; this page speaks `
         + `${PROTOCOL_VERSION}: update the `
-        + `${protocol < PROTOCOL_VERSION ? 'pen\'s firmware' : 'page'} so both match.`);
-      problem.version = true;
-      throw problem;
+        + `${protocol < PROTOCOL_VERSION ? 'pen\'s firmware' : 'page'} so both match.`,
+      { version: true });
     }
     return { protocol, firmware: `${major}.${minor}.${patch}`, sampleRate, maxPatternBytes,
       features, name };
   }
 
-  /** `transport` is gone. Bluetooth (or `reopen`) connects again to the same device or port
-   *  once `closing` (the old link's close) is done; USB waits for the port to come back. */
+  /**
+   * `transport` is gone. Bluetooth (or `reopen`) connects again to the same device or port
+   * once `closing` (the old link's close) is done; USB waits for the port to come back.
+   * @param {Transport} transport
+   * @param {string} reason
+   * @param {boolean} [reopen]
+   * @param {Promise<void> | null} [closing]
+   */
   lost(transport, reason, reopen = transport.kind === 'ble', closing = null) {
     if (transport !== this.transport) return;
     this.transport = null;
+    this.stopTimers();
     this.generation += 1;
     this.failPending(reason);
     const token = reopen && !this.userClosed ? {} : null;
     this.reconnecting = token;
+    this.endPauses(); // an older reconnect loop ends now
     // What the pen is, holds and plays is unknown until it says HELLO again: nothing may go
     // out with the INFO of before (the state refresh, a change of pen).
     this.update({ state: 'disconnected', info: null, progress: null, pattern: null,
@@ -504,27 +417,35 @@ export class PenLink {
     if (token) this.reconnect(transport, reason, token, closing);
   }
 
-  /** The pen stopped answering (hung, or its end of the link did): let go of the link and
-   *  connect to the same device or port again. */
+  /**
+   * The pen stopped answering (hung, or its end of the link did): let go of the link and
+   * connect to the same device or port again.
+   * @param {Transport} transport
+   * @param {string} reason
+   */
   hangUp(transport, reason) {
     if (transport !== this.transport) return;
     const closing = transport.close().catch(() => {});
     this.lost(transport, reason, true, closing);
   }
 
-  /** Connect to the same Bluetooth device or serial port again, backing off to RETRY_MAX_MS,
-   *  until it works, the user disconnects or connects another pen (or the port comes back). */
+  /**
+   * Connect to the same Bluetooth device or serial port again, backing off to RETRY_MAX_MS,
+   * until it works, the user disconnects or connects another pen (or the port comes back).
+   * @param {Transport} old the transport that was lost
+   * @param {string} reason
+   * @param {object} token this loop's; it stops when the link's `reconnecting` is another
+   * @param {Promise<void> | null} [closing]
+   */
   async reconnect(old, reason, token, closing = null) {
     const going = () => !this.userClosed && this.reconnecting === token && !this.transport;
     try {
-      if (closing) await Promise.race([closing, sleep(CLOSE_WAIT_MS)]);
+      if (closing) await Promise.race([closing, this.pause(CLOSE_WAIT_MS)]);
       let wait = 200;
       while (going()) {
-        await sleep(wait);
+        await this.pause(wait);
         if (!going()) return;
-        const again = old.kind === 'ble' ? new BleTransport(old.device)
-          : new SerialTransport(old.port);
-        if (await this.open(again, reason)) return;
+        if (await this.open(old.again(), reason)) return;
         wait = Math.min(wait * 2, RETRY_MAX_MS);
       }
     } finally {
@@ -532,14 +453,14 @@ export class PenLink {
     }
   }
 
-  /** USB: a port the user gave before is back (the pen was plugged in again or rebooted). */
+  /**
+   * USB: a port the user gave before is back (the pen was plugged in again or rebooted).
+   * @param {SerialPort} port
+   */
   portBack(port) {
     const last = this.lastTransport;
     if (this.userClosed || this.transport || !last || last.kind !== 'usb') return;
-    const a = last.port.getInfo ? last.port.getInfo() : {};
-    const b = port.getInfo ? port.getInfo() : {};
-    const same = a.usbVendorId === b.usbVendorId && a.usbProductId === b.usbProductId;
-    if (port !== last.port && !same) return;
+    if (!last.isPort(port)) return;
     this.start(new SerialTransport(port)).catch(() => {});
   }
 
@@ -551,6 +472,10 @@ export class PenLink {
     return seq;
   }
 
+  /**
+   * @param {Uint8Array} bytes what the transport read
+   * @param {Transport} transport
+   */
   received(bytes, transport) {
     if (transport !== this.transport) return;
     for (const [ftype, seq, payload] of this.decoder.feed(bytes)) {
@@ -570,7 +495,10 @@ export class PenLink {
     if (this.decoder.errors !== this.status.errors) this.update({ errors: this.decoder.errors });
   }
 
-  /** A NACK nobody waits for: a refused PATTERN_CHUNK fails the upload at its next PONG. */
+  /**
+   * A NACK nobody waits for: a refused PATTERN_CHUNK fails the upload at its next PONG.
+   * @param {Uint8Array} payload
+   */
   refused(payload) {
     try {
       const [ftype, code] = unpackNack(payload);
@@ -580,6 +508,7 @@ export class PenLink {
     } catch { /* a malformed NACK says nothing */ }
   }
 
+  /** @param {Uint8Array} payload */
   event(payload) {
     let kind;
     let value;
@@ -602,12 +531,20 @@ export class PenLink {
     this.syncPattern().catch(() => {}); // reported in the status
   }
 
-  /** Send a frame and wait for the reply with its seq: [ftype, seq, payload]. */
+  /**
+   * Send a frame and wait for the reply with its seq.
+   * @param {number} ftype
+   * @param {Uint8Array} payload
+   * @param {number} [timeoutMs]
+   * @param {Transport | null} [transport]
+   * @returns {Promise<Frame>} [ftype, seq, payload] of the reply
+   */
   request(ftype, payload, timeoutMs = REPLY_MS, transport = this.transport) {
     if (!transport) return Promise.reject(new PenError('no pen connected'));
     const seq = this.nextSeq();
     return new Promise((resolve, reject) => {
-      const entry = { resolve, reject, timer: null };
+      /** @type {Pending} */
+      const entry = { resolve, reject, timer: undefined };
       // Seqs wrap at 256: a stale timer or write error must not take a newer request's entry.
       const drop = () => {
         if (this.pending.get(seq) !== entry) return false;
@@ -617,9 +554,7 @@ export class PenLink {
       };
       entry.timer = setTimeout(() => {
         drop();
-        const error = new PenError(`the pen did not answer within ${timeoutMs} ms`);
-        error.timeout = true;
-        reject(error);
+        reject(new PenError(`the pen did not answer within ${timeoutMs} ms`, { timeout: true }));
       }, timeoutMs);
       this.pending.set(seq, entry);
       transport.write(encodeFrame(ftype, seq, payload)).catch((error) => {
@@ -628,6 +563,7 @@ export class PenLink {
     });
   }
 
+  /** @param {string} reason */
   failPending(reason) {
     for (const { reject, timer } of this.pending.values()) {
       clearTimeout(timer);
@@ -636,7 +572,13 @@ export class PenLink {
     this.pending.clear();
   }
 
-  /** PING → PONG: { roundTripMs, deviceUs }. */
+  /**
+   * PING → PONG.
+   * @param {number} [timeoutMs]
+   * @param {Transport | null} [transport]
+   * @returns {Promise<{ roundTripMs: number, deviceUs: number }>} the round trip (ms) and the
+   *   pen's clock (µs, wraps at 2**32)
+   */
   async ping(timeoutMs = REPLY_MS, transport = this.transport) {
     const token = (Math.random() * 0x100000000) >>> 0;
     const started = performance.now();
@@ -647,12 +589,18 @@ export class PenLink {
     return { roundTripMs: performance.now() - started, deviceUs };
   }
 
-  /** The next heartbeat in heartbeatMs (one chain of them: a call replaces the next beat). */
+  /** The next heartbeat in heartbeatMs (one chain of them: a call replaces the next beat);
+   *  none while no transport is open (opening one starts the chain). */
   scheduleBeat() {
-    clearTimeout(this.heartbeat);
-    this.heartbeat = setTimeout(() => {
-      this.beat().finally(() => this.scheduleBeat());
+    if (this.heartbeat !== null) clearTimeout(this.heartbeat);
+    this.heartbeat = null;
+    if (!this.transport) return;
+    const next = setTimeout(() => {
+      this.beat().finally(() => {
+        if (this.heartbeat === next) this.scheduleBeat(); // not replaced nor stopped meanwhile
+      });
     }, this.heartbeatMs);
+    this.heartbeat = next;
   }
 
   /** PING an idle pen (nothing asked, nothing uploading): without it a hung pen would look
@@ -676,7 +624,10 @@ export class PenLink {
 
   // ---- the pattern ----
 
-  /** The page's pen changed: its pattern goes to the pen (when one is connected). */
+  /**
+   * The page's pen changed: its pattern goes to the pen (when one is connected).
+   * @param {string} name the pen's profile name
+   */
   setPen(name) {
     this.pen = name;
     this.syncPattern().catch(() => {}); // reported in the status
@@ -703,9 +654,16 @@ export class PenLink {
     }
   }
 
+  /**
+   * Fetch `name`'s pattern at the pen's rate and upload it, unless the pen holds it already.
+   * Every outcome becomes the status.
+   * @param {string} name
+   * @param {PenInfo} info
+   */
   async upload(name, info) {
     const transport = this.transport;
     const generation = this.generation;
+    if (!transport || !this.fetchPattern) return;
     let bytes;
     try {
       bytes = new Uint8Array(await this.fetchPattern(name, info.sampleRate));
@@ -739,7 +697,7 @@ export class PenLink {
         if (generation !== this.generation) return;
         // Once more (a lost frame, a late reply, a damaged chunk), unless the pen refused the
         // pattern itself: that would only be refused again.
-        if (attempt < UPLOAD_TRIES && !error.refused) {
+        if (attempt < UPLOAD_TRIES && !(error instanceof PenError && error.refused)) {
           this.update({ progress: 0,
             message: `Uploading the ${name} pattern again (${describe(error)})…` });
           continue;
@@ -751,29 +709,46 @@ export class PenLink {
     }
   }
 
-  /** PATTERN_BEGIN → ACK, the chunks, PATTERN_COMMIT → ACK (the pen keeps its old pattern
-   *  until then). Resolves false when another connection overtook this one; throws PenError
-   *  (`refused` set when the pen refused the pattern as such: too large, format, rate). */
+  /**
+   * PATTERN_BEGIN → ACK, the chunks, PATTERN_COMMIT → ACK (the pen keeps its old pattern
+   * until then). Throws PenError (`refused` set when the pen refused the pattern as such: too
+   * large, format, rate).
+   * @param {string} name
+   * @param {Uint8Array} bytes the pattern, int16 LE
+   * @param {number} crc its CRC-32
+   * @param {PenInfo} info
+   * @param {Transport} transport
+   * @param {number} generation the connection this upload belongs to
+   * @returns {Promise<boolean>} false when another connection overtook this one
+   */
   async sendPattern(name, bytes, crc, info, transport, generation) {
     const pid = crc & 0xffff;
-    const refusal = (what, code) => {
-      const error = new PenError(`The pen refused the ${name} pattern (${what}): `
-        + `${NACK_TEXT[code] || `error ${code}`}; it keeps its last pattern.`);
-      error.refused = [E_TOO_LARGE, E_BAD_FORMAT, E_BAD_RATE].includes(code);
-      return error;
-    };
+    /**
+     * @param {string} what
+     * @param {number} code
+     */
+    const refusal = (what, code) => new PenError(`The pen refused the ${name} pattern (${what}): `
+      + `${NACK_TEXT[code] || `error ${code}`}; it keeps its last pattern.`,
+    { refused: [E_TOO_LARGE, E_BAD_FORMAT, E_BAD_RATE].includes(code) });
+    /**
+     * @param {string} what
+     * @param {Frame} reply
+     */
     const fail = (what, reply) => {
       const [ftype, , payload] = reply;
       if (ftype === NACK) return refusal(what, unpackNack(payload)[1]);
       return new PenError(`The pen answered ${what} with frame type ${ftype}.`);
     };
+    /**
+     * @param {Frame} reply
+     * @param {number} ftype
+     */
     const acked = (reply, ftype) => reply[0] === ACK && unpackAck(reply[2]) === ftype;
     this.chunkRefused = null;
     const begin = await this.request(PATTERN_BEGIN,
       packPatternBegin(pid, bytes.length / 2, info.sampleRate, FORMAT_S16LE, crc),
       REPLY_MS, transport);
     if (!acked(begin, PATTERN_BEGIN)) throw fail('PATTERN_BEGIN', begin);
-    const window = transport.kind === 'ble' ? BLE_UPLOAD_WINDOW : UPLOAD_WINDOW;
     let count = 0;
     for (let offset = 0; offset < bytes.length; offset += MAX_CHUNK) {
       if (generation !== this.generation) return false;
@@ -783,11 +758,11 @@ export class PenLink {
       await transport.write(encodeFrame(PATTERN_CHUNK, this.nextSeq(),
         packPatternChunk(offset, chunk)));
       count += 1;
-      // Every `window` chunks the pen must have handled all so far (its PONG comes after
+      // Every uploadWindow chunks the pen must have handled all so far (its PONG comes after
       // them): a link without flow control (Bluetooth writes without response) never runs
       // further ahead of the pen than its receive buffer holds, and a refused chunk stops the
       // upload early.
-      if (count % window === 0) {
+      if (count % transport.uploadWindow === 0) {
         await this.ping(REPLY_MS, transport);
         if (this.chunkRefused !== null) throw refusal('PATTERN_CHUNK', this.chunkRefused);
       }
@@ -805,6 +780,9 @@ export class PenLink {
   /**
    * The page's pen state: playing (the pen is down and the modality is tactile), gain 0-1 (the
    * Eq. 1 gain over a_max), fadeMs (the ramp to it). Sent at once, latest wins.
+   * @param {boolean} playing
+   * @param {number} gain
+   * @param {number} [fadeMs]
    */
   setState(playing, gain, fadeMs = 5) {
     const g = Number.isFinite(gain) ? Math.min(Math.max(gain, 0), 1) : 0;
@@ -814,14 +792,19 @@ export class PenLink {
     this.sendState();
   }
 
-  /** Send the wanted state if it differs from the last sent (or `again`); one write at a
-   *  time, and a state that changed meanwhile goes right after. */
+  /**
+   * Send the wanted state if it differs from the last sent (or `again`); one write at a time,
+   * and a state that changed meanwhile goes right after.
+   * @param {boolean} [again]
+   */
   sendState(again = false) {
     const transport = this.transport;
     if (!transport || !this.status.info) return;
     const { playing, gain, fadeMs } = this.wanted;
+    /** @type {StateFrame} */
     const frame = [playing ? 1 : 0, Math.round(gain * GAIN_ONE), RATE_ONE, fadeMs];
-    const same = this.sentState && frame.every((v, i) => v === this.sentState[i]);
+    const sent = this.sentState;
+    const same = sent !== null && frame.every((v, i) => v === sent[i]);
     if (same && !again) return;
     const generation = this.generation;
     if (this.stateBusy === generation) {

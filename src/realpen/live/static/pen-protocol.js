@@ -1,3 +1,4 @@
+// @ts-check
 // The pen protocol for the page: the same codec as realpen/device/protocol.py (docs/protocol.md),
 // byte for byte, so the page can speak to a pen over Web Serial or Web Bluetooth itself.
 //
@@ -9,6 +10,20 @@
 // Bytes are Uint8Arrays throughout. The unpack functions return arrays in the order of
 // protocol.py's tuples (unpackInfo returns the eight INFO fields) and throw ProtocolError on a
 // payload of the wrong length, where protocol.py raises ValueError.
+
+/**
+ * Bytes as the codec returns them.
+ * @typedef {Uint8Array<ArrayBuffer>} Bytes
+ */
+/**
+ * Bytes as the codec takes them: a Uint8Array, an ArrayBuffer, any view of one, or an array of
+ * byte values.
+ * @typedef {Uint8Array | ArrayBuffer | ArrayBufferView | number[]} BytesLike
+ */
+/**
+ * A decoded frame: its type, sequence number and payload.
+ * @typedef {[ftype: number, seq: number, payload: Bytes]} Frame
+ */
 
 export const PROTOCOL_VERSION = 1;
 export const MAX_FRAME = 256; // largest decoded frame (type + seq + payload + CRC), bytes
@@ -38,6 +53,7 @@ export const E_NO_UPLOAD = 9;
 export const E_BAD_RATE = 10;
 export const E_BAD_STATE = 11;
 
+/** @type {Readonly<Record<number, string>>} */
 export const NACK_TEXT = {
   [E_UNKNOWN_TYPE]: 'unknown frame type',
   [E_BAD_LENGTH]: 'payload of the wrong length',
@@ -52,6 +68,7 @@ export const NACK_TEXT = {
   [E_BAD_STATE]: 'state value out of range',
 };
 
+/** @type {Readonly<Record<number, string>>} */
 export const TYPE_NAMES = {
   [HELLO]: 'HELLO', [INFO]: 'INFO', [PATTERN_BEGIN]: 'PATTERN_BEGIN',
   [PATTERN_CHUNK]: 'PATTERN_CHUNK', [PATTERN_COMMIT]: 'PATTERN_COMMIT', [SET_STATE]: 'SET_STATE',
@@ -64,6 +81,7 @@ export const EV_BATTERY = 3; // value: battery voltage in mV
 export const EV_PATTERN = 4; // value: id of the pattern now playing
 export const EV_DECODE_ERRORS = 5; // value: frames dropped so far
 
+/** @type {Readonly<Record<number, string>>} */
 export const EVENT_NAMES = {
   [EV_BOOT]: 'boot', [EV_UNDERRUN]: 'underrun', [EV_BATTERY]: 'battery', [EV_PATTERN]: 'pattern',
   [EV_DECODE_ERRORS]: 'decode_errors',
@@ -89,22 +107,32 @@ export const MAX_NAME = 32; // bytes of the pen's UTF-8 name in INFO
 
 /** Bad bytes: a malformed COBS block or a payload of the wrong length (ValueError in Python). */
 export class ProtocolError extends Error {
+  /** @param {string} message */
   constructor(message) {
     super(message);
     this.name = 'ProtocolError';
   }
 }
 
+/**
+ * @param {BytesLike} data
+ * @returns {Bytes} the same bytes, not copied where they are a Uint8Array or a view already
+ */
 function bytesOf(data) {
-  if (data instanceof Uint8Array) return data;
+  if (data instanceof Uint8Array) return /** @type {Bytes} */ (data);
   if (data instanceof ArrayBuffer) return new Uint8Array(data);
   if (ArrayBuffer.isView(data)) {
-    return new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
+    return new Uint8Array(/** @type {ArrayBuffer} */ (data.buffer), data.byteOffset,
+      data.byteLength);
   }
   if (Array.isArray(data)) return Uint8Array.from(data);
   throw new TypeError('expected bytes (Uint8Array, ArrayBuffer, DataView or an array)');
 }
 
+/**
+ * @param {...Uint8Array} parts
+ * @returns {Bytes}
+ */
 function concat(...parts) {
   const out = new Uint8Array(parts.reduce((n, p) => n + p.length, 0));
   let at = 0;
@@ -118,7 +146,11 @@ function concat(...parts) {
 // ---- checksums ------------------------------------------------------------------------------
 
 /** CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final XOR) of `data`;
- *  `crc` continues a previous result. "123456789" → 0x29B1. */
+ *  `crc` continues a previous result. "123456789" → 0x29B1.
+ * @param {BytesLike} data
+ * @param {number} [crc]
+ * @returns {number}
+ */
 export function crc16(data, crc = 0xffff) {
   const bytes = bytesOf(data);
   for (let i = 0; i < bytes.length; i += 1) {
@@ -141,7 +173,11 @@ const CRC32_TABLE = (() => {
 })();
 
 /** CRC-32 as zlib.crc32 / binascii.crc32 compute it (of a pattern's sample bytes), unsigned;
- *  `crc` continues a previous result. */
+ *  `crc` continues a previous result.
+ * @param {BytesLike} data
+ * @param {number} [crc]
+ * @returns {number}
+ */
 export function crc32(data, crc = 0) {
   const bytes = bytesOf(data);
   let c = (crc ^ 0xffffffff) >>> 0;
@@ -152,7 +188,10 @@ export function crc32(data, crc = 0) {
 // ---- COBS -----------------------------------------------------------------------------------
 
 /** Consistent Overhead Byte Stuffing: `data` without any 0x00 (the delimiter is not added).
- *  Data that ends exactly at a full block of 254 gets no empty block after it. */
+ *  Data that ends exactly at a full block of 254 gets no empty block after it.
+ * @param {BytesLike} data
+ * @returns {Bytes}
+ */
 export function cobsEncode(data) {
   const bytes = bytesOf(data);
   const out = new Uint8Array(bytes.length + Math.floor(bytes.length / 254) + 1);
@@ -186,7 +225,10 @@ export function cobsEncode(data) {
 }
 
 /** The bytes a COBS block stands for; throws ProtocolError when it is malformed (a 0x00
- *  inside, or a block that runs past the end). */
+ *  inside, or a block that runs past the end).
+ * @param {BytesLike} data
+ * @returns {Bytes}
+ */
 export function cobsDecode(data) {
   const bytes = bytesOf(data);
   const out = new Uint8Array(bytes.length);
@@ -214,7 +256,12 @@ export function cobsDecode(data) {
 // ---- frames ---------------------------------------------------------------------------------
 
 /** One frame on the wire: COBS(type, seq, payload, CRC-16 LE) + 0x00; throws ProtocolError
- *  for a frame longer than MAX_FRAME. */
+ *  for a frame longer than MAX_FRAME.
+ * @param {number} ftype
+ * @param {number} seq
+ * @param {BytesLike} [payload]
+ * @returns {Bytes}
+ */
 export function encodeFrame(ftype, seq, payload = new Uint8Array(0)) {
   const body = bytesOf(payload);
   if (body.length + 4 > MAX_FRAME) {
@@ -239,6 +286,7 @@ export function encodeFrame(ftype, seq, payload = new Uint8Array(0)) {
  * grow.
  */
 export class FrameDecoder {
+  /** @param {number} [maxFrame] the largest decoded frame accepted, bytes */
   constructor(maxFrame = MAX_FRAME) {
     this.maxFrame = maxFrame;
     this.limit = maxFrame + Math.floor(maxFrame / 254) + 2; // as protocol.py's max_encoded
@@ -248,8 +296,13 @@ export class FrameDecoder {
     this.errors = 0;
   }
 
+  /**
+   * @param {BytesLike} data the next bytes of the stream
+   * @returns {Frame[]} the frames they complete
+   */
   feed(data) {
     const bytes = bytesOf(data);
+    /** @type {Frame[]} */
     const frames = [];
     for (let i = 0; i < bytes.length; i += 1) {
       const byte = bytes[i];
@@ -268,6 +321,7 @@ export class FrameDecoder {
     return frames;
   }
 
+  /** @returns {Frame | null} the frame the buffer holds at a delimiter, if it is good */
   finish() {
     const { length, overflow } = this;
     this.length = 0;
@@ -301,11 +355,22 @@ export class FrameDecoder {
 
 // ---- messages -------------------------------------------------------------------------------
 
-function payload(size) {
+/**
+ * @param {number} size
+ * @returns {[Bytes, DataView<ArrayBuffer>]} a zeroed payload and a view to fill it
+ */
+function newPayload(size) {
   const bytes = new Uint8Array(size);
   return [bytes, new DataView(bytes.buffer)];
 }
 
+/**
+ * @param {BytesLike} p a payload
+ * @param {number} size the bytes it must have (at least, with `atLeast`)
+ * @param {string} what the message, for the error
+ * @param {boolean} [atLeast]
+ * @returns {[Bytes, DataView<ArrayBuffer>]}
+ */
 function view(p, size, what, atLeast = false) {
   const bytes = bytesOf(p);
   if (atLeast ? bytes.length < size : bytes.length !== size) {
@@ -315,28 +380,47 @@ function view(p, size, what, atLeast = false) {
   return [bytes, new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength)];
 }
 
+/** @param {number} value */
 function u16(value) { return Number(value) & 0xffff; }
+/** @param {number} value */
 function u32(value) { return Number(value) >>> 0; }
 
-/** HELLO {version u16}. */
+/** HELLO {version u16}.
+ * @param {number} version
+ * @returns {Bytes}
+ */
 export function packHello(version) {
-  const [bytes, dv] = payload(2);
+  const [bytes, dv] = newPayload(2);
   dv.setUint16(0, u16(version), true);
   return bytes;
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {number} version
+ */
 export function unpackHello(p) {
   const [, dv] = view(p, 2, 'HELLO');
   return dv.getUint16(0, true);
 }
 
 /** INFO {protocol u16, fw major/minor/patch u8, sample_rate u32 (Hz), max_pattern_bytes u32,
- *  features u32} + name (UTF-8, at most MAX_NAME bytes). */
+ *  features u32} + name (UTF-8, at most MAX_NAME bytes).
+ * @param {number} protocol
+ * @param {number} fwMajor
+ * @param {number} fwMinor
+ * @param {number} fwPatch
+ * @param {number} sampleRate Hz
+ * @param {number} maxPatternBytes
+ * @param {number} features FEATURE_* bits
+ * @param {string | BytesLike} name
+ * @returns {Bytes}
+ */
 export function packInfo(protocol, fwMajor, fwMinor, fwPatch, sampleRate, maxPatternBytes,
   features, name) {
   const text = typeof name === 'string' ? new TextEncoder().encode(name) : bytesOf(name);
   if (text.length > MAX_NAME) throw new ProtocolError(`name longer than ${MAX_NAME} bytes`);
-  const [bytes, dv] = payload(17 + text.length);
+  const [bytes, dv] = newPayload(17 + text.length);
   dv.setUint16(0, u16(protocol), true);
   dv.setUint8(2, fwMajor & 0xff);
   dv.setUint8(3, fwMinor & 0xff);
@@ -348,6 +432,11 @@ export function packInfo(protocol, fwMajor, fwMinor, fwPatch, sampleRate, maxPat
   return bytes;
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {[protocol: number, fwMajor: number, fwMinor: number, fwPatch: number,
+ *   sampleRate: number, maxPatternBytes: number, features: number, name: string]}
+ */
 export function unpackInfo(p) {
   const [bytes, dv] = view(p, 17, 'INFO', true);
   if (bytes.length > 17 + MAX_NAME) {
@@ -364,9 +453,16 @@ export function unpackInfo(p) {
     dv.getUint32(5, true), dv.getUint32(9, true), dv.getUint32(13, true), name];
 }
 
-/** PATTERN_BEGIN {id u16, length u32 (samples), rate u32 (Hz), format u8, crc32 u32}. */
+/** PATTERN_BEGIN {id u16, length u32 (samples), rate u32 (Hz), format u8, crc32 u32}.
+ * @param {number} pid
+ * @param {number} length samples
+ * @param {number} rate Hz
+ * @param {number} fmt FORMAT_*
+ * @param {number} crc CRC-32 of the sample bytes
+ * @returns {Bytes}
+ */
 export function packPatternBegin(pid, length, rate, fmt, crc) {
-  const [bytes, dv] = payload(15);
+  const [bytes, dv] = newPayload(15);
   dv.setUint16(0, u16(pid), true);
   dv.setUint32(2, u32(length), true);
   dv.setUint32(6, u32(rate), true);
@@ -375,24 +471,36 @@ export function packPatternBegin(pid, length, rate, fmt, crc) {
   return bytes;
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {[pid: number, length: number, rate: number, fmt: number, crc: number]}
+ */
 export function unpackPatternBegin(p) {
   const [, dv] = view(p, 15, 'PATTERN_BEGIN');
   return [dv.getUint16(0, true), dv.getUint32(2, true), dv.getUint32(6, true), dv.getUint8(10),
     dv.getUint32(11, true)];
 }
 
-/** PATTERN_CHUNK {offset u32 (bytes)} + 1 … MAX_CHUNK pattern bytes. */
+/** PATTERN_CHUNK {offset u32 (bytes)} + 1 … MAX_CHUNK pattern bytes.
+ * @param {number} offset bytes into the pattern
+ * @param {BytesLike} data
+ * @returns {Bytes}
+ */
 export function packPatternChunk(offset, data) {
   const body = bytesOf(data);
   if (body.length > MAX_CHUNK) {
     throw new ProtocolError(`chunk of ${body.length} bytes is larger than ${MAX_CHUNK}`);
   }
-  const [bytes, dv] = payload(4 + body.length);
+  const [bytes, dv] = newPayload(4 + body.length);
   dv.setUint32(0, u32(offset), true);
   bytes.set(body, 4);
   return bytes;
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {[offset: number, data: Bytes]}
+ */
 export function unpackPatternChunk(p) {
   const [bytes, dv] = view(p, 5, 'PATTERN_CHUNK', true);
   if (bytes.length > 4 + MAX_CHUNK) {
@@ -402,21 +510,34 @@ export function unpackPatternChunk(p) {
   return [dv.getUint32(0, true), bytes.slice(4)];
 }
 
-/** PATTERN_COMMIT {id u16}. */
+/** PATTERN_COMMIT {id u16}.
+ * @param {number} pid
+ * @returns {Bytes}
+ */
 export function packPatternCommit(pid) {
-  const [bytes, dv] = payload(2);
+  const [bytes, dv] = newPayload(2);
   dv.setUint16(0, u16(pid), true);
   return bytes;
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {number} pid
+ */
 export function unpackPatternCommit(p) {
   const [, dv] = view(p, 2, 'PATTERN_COMMIT');
   return dv.getUint16(0, true);
 }
 
-/** SET_STATE {playing u8, gain u16 (GAIN_ONE = full), rate u16 (Q12), fade_ms u16}. */
+/** SET_STATE {playing u8, gain u16 (GAIN_ONE = full), rate u16 (Q12), fade_ms u16}.
+ * @param {number} playing 0 or 1
+ * @param {number} gain 0 … GAIN_ONE
+ * @param {number} rate Q12, RATE_ONE plays the pattern as stored
+ * @param {number} fadeMs
+ * @returns {Bytes}
+ */
 export function packSetState(playing, gain, rate, fadeMs) {
-  const [bytes, dv] = payload(7);
+  const [bytes, dv] = newPayload(7);
   dv.setUint8(0, playing & 0xff);
   dv.setUint16(1, u16(gain), true);
   dv.setUint16(3, u16(rate), true);
@@ -424,71 +545,116 @@ export function packSetState(playing, gain, rate, fadeMs) {
   return bytes;
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {[playing: number, gain: number, rate: number, fadeMs: number]}
+ */
 export function unpackSetState(p) {
   const [, dv] = view(p, 7, 'SET_STATE');
   return [dv.getUint8(0), dv.getUint16(1, true), dv.getUint16(3, true), dv.getUint16(5, true)];
 }
 
-/** PING {token u32}. */
+/** PING {token u32}.
+ * @param {number} token
+ * @returns {Bytes}
+ */
 export function packPing(token) {
-  const [bytes, dv] = payload(4);
+  const [bytes, dv] = newPayload(4);
   dv.setUint32(0, u32(token), true);
   return bytes;
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {number} token
+ */
 export function unpackPing(p) {
   const [, dv] = view(p, 4, 'PING');
   return dv.getUint32(0, true);
 }
 
-/** PONG {token u32, device_us u32 (µs, wraps at 2**32)}. */
+/** PONG {token u32, device_us u32 (µs, wraps at 2**32)}.
+ * @param {number} token
+ * @param {number} deviceUs
+ * @returns {Bytes}
+ */
 export function packPong(token, deviceUs) {
-  const [bytes, dv] = payload(8);
+  const [bytes, dv] = newPayload(8);
   dv.setUint32(0, u32(token), true);
   dv.setUint32(4, u32(deviceUs), true);
   return bytes;
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {[token: number, deviceUs: number]}
+ */
 export function unpackPong(p) {
   const [, dv] = view(p, 8, 'PONG');
   return [dv.getUint32(0, true), dv.getUint32(4, true)];
 }
 
-/** ACK {ftype u8}: the frame type acknowledged. */
+/** ACK {ftype u8}: the frame type acknowledged.
+ * @param {number} ftype
+ * @returns {Bytes}
+ */
 export function packAck(ftype) {
   return Uint8Array.of(ftype & 0xff);
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {number} ftype
+ */
 export function unpackAck(p) {
   const [bytes] = view(p, 1, 'ACK');
   return bytes[0];
 }
 
-/** NACK {ftype u8, code u8}. */
+/** NACK {ftype u8, code u8}.
+ * @param {number} ftype
+ * @param {number} code E_*
+ * @returns {Bytes}
+ */
 export function packNack(ftype, code) {
   return Uint8Array.of(ftype & 0xff, code & 0xff);
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {[ftype: number, code: number]}
+ */
 export function unpackNack(p) {
   const [bytes] = view(p, 2, 'NACK');
   return [bytes[0], bytes[1]];
 }
 
-/** EVENT {kind u8, value u32}. */
+/** EVENT {kind u8, value u32}.
+ * @param {number} kind EV_*
+ * @param {number} value
+ * @returns {Bytes}
+ */
 export function packEvent(kind, value) {
-  const [bytes, dv] = payload(5);
+  const [bytes, dv] = newPayload(5);
   dv.setUint8(0, kind & 0xff);
   dv.setUint32(1, u32(value), true);
   return bytes;
 }
 
+/**
+ * @param {BytesLike} p
+ * @returns {[kind: number, value: number]}
+ */
 export function unpackEvent(p) {
   const [, dv] = view(p, 5, 'EVENT');
   return [dv.getUint8(0), dv.getUint32(1, true)];
 }
 
-/** Each message's pack and unpack function by protocol.py's name of its pack function
- *  ('pack_hello' → [packHello, unpackHello]), as the test vectors name them. */
+/**
+ * Each message's pack and unpack function by protocol.py's name of its pack function
+ * ('pack_hello' → [packHello, unpackHello]), as the test vectors name them.
+ * @type {Readonly<Record<string, [(...fields: any[]) => Bytes, (p: BytesLike) => unknown]>>}
+ */
 export const MESSAGES = {
   pack_hello: [packHello, unpackHello],
   pack_info: [packInfo, unpackInfo],
@@ -503,11 +669,18 @@ export const MESSAGES = {
   pack_event: [packEvent, unpackEvent],
 };
 
-/** "0a1b…" ↔ bytes: the test vectors carry bytes as hex. */
+/** "0a1b…" ↔ bytes: the test vectors carry bytes as hex.
+ * @param {BytesLike} data
+ * @returns {string}
+ */
 export function toHex(data) {
   return Array.from(bytesOf(data), (b) => b.toString(16).padStart(2, '0')).join('');
 }
 
+/**
+ * @param {string} text
+ * @returns {Bytes}
+ */
 export function fromHex(text) {
   const clean = String(text).replace(/\s+/g, '');
   if (clean.length % 2 || /[^0-9a-fA-F]/.test(clean)) throw new ProtocolError(`not hex: ${text}`);

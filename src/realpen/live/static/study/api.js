@@ -47,7 +47,7 @@ export async function call(method, url, body = undefined) {
   } catch (error) {
     throw new Unreachable(`${method} ${url}: ${error.message || error}`);
   }
-  let parsed = null;
+  let parsed;
   try { parsed = await response.json(); } catch { parsed = null; }
   if (response.status >= 500) throw new Unreachable(`${method} ${url}: HTTP ${response.status}`);
   if (!response.ok) throw new Refused(response.status, parsed);
@@ -64,7 +64,7 @@ export async function bytes(url) {
   }
   if (response.status >= 500) throw new Unreachable(`GET ${url}: HTTP ${response.status}`);
   if (!response.ok) {
-    let parsed = null;
+    let parsed;
     try { parsed = await response.json(); } catch { parsed = null; }
     throw new Refused(response.status, parsed);
   }

@@ -413,7 +413,9 @@ async function showFeedback(feedback) {
   study.feedback = { correct, answer };
   showScreen('feedback', correct ? 'Right' : 'Not quite', `It was the ${answer}.`);
   // The participant reads it at their own pace; the trial's time was taken at the answer.
-  await new Promise((resolve) => $('continue').addEventListener('click', resolve, { once: true }));
+  await new Promise((resolve) => {
+    $('continue').addEventListener('click', resolve, { once: true });
+  });
 }
 
 function endTrial(outcome) {
