@@ -1,4 +1,5 @@
-"""The core tests of realpen.stats against the reference numbers in ../shared/golden, and their
+"""The core tests of realpen.stats against the reference numbers of R, PSPP, scipy, statsmodels
+and pingouin in tests/data/stats_reference (their provenance: the README there), and their
 refusals of bad input.
 
 Tolerance: a reference printed with many digits is matched within 1e-6 relative; one printed
@@ -20,19 +21,21 @@ import pytest
 import scipy.stats
 
 from realpen.errors import ParameterError
-from realpen.stats.anova import _balanced_wide, _contrast_decomposition, pairwise, rm_anova
+from realpen.stats.anova import pairwise, rm_anova
+from realpen.stats.art import aligned_rank_transform
+from realpen.stats.contrasts import contrast_decomposition
 from realpen.stats.intervals import cell_cis, mean_ci
+from realpen.stats.long import balanced_wide
 from realpen.stats.nonparametric import (
     _exact_sign_flip_p,
     _signed_rank_normal,
-    aligned_rank_transform,
     friedman,
     wilcoxon,
     wilcoxon_long,
 )
 from realpen.stats.results import TEST_COLUMNS
 
-GOLDEN = Path(__file__).parents[1].parent / "shared" / "golden"
+GOLDEN = Path(__file__).resolve().parent / "data" / "stats_reference"
 METHODS = ("exact", "r", "spss")
 
 
@@ -48,18 +51,12 @@ def near(actual: float, reference: Decimal | int) -> bool:
 
 @pytest.fixture(scope="module")
 def golden() -> dict:
-    path = GOLDEN / "stats_reference.json"
-    if not path.is_file():
-        pytest.skip(f"reference numbers not available: {path} is absent (../shared/golden)")
-    return json.loads(path.read_text(), parse_float=Decimal)["cases"]
+    return json.loads((GOLDEN / "stats_reference.json").read_text(), parse_float=Decimal)["cases"]
 
 
 @pytest.fixture(scope="module")
 def anova_2x3() -> pd.DataFrame:
-    path = GOLDEN / "anova_rm_statsmodels.csv"
-    if not path.is_file():
-        pytest.skip(f"reference data not available: {path} is absent (../shared/golden)")
-    return pd.read_csv(path, index_col=0).iloc[:48]
+    return pd.read_csv(GOLDEN / "anova_rm_statsmodels.csv", index_col=0).iloc[:48]
 
 
 def long_from_matrix(matrix: list[list]) -> pd.DataFrame:
@@ -191,7 +188,7 @@ def test_wilcoxon_long_pairs_by_subject():
 
 def test_contrast_fallback_agrees_with_pingouin(anova_2x3):
     table = rm_anova(anova_2x3, dv="DV", within=["A", "B"], subject="id").set_index("effect")
-    parts = _contrast_decomposition(_balanced_wide(anova_2x3, dv="DV", within=["A", "B"], subject="id"))
+    parts = contrast_decomposition(balanced_wide(anova_2x3, dv="DV", within=["A", "B"], subject="id"))
     error = sum(part["ss_error"] for part in parts.values())
     for effect, key in (("A", (0,)), ("B", (1,)), ("A:B", (0, 1))):
         ges = parts[key]["ss"] / (parts[key]["ss"] + error)

@@ -14,9 +14,9 @@ import pandas as pd
 import pytest
 from matplotlib.figure import Figure
 
-from realpen.display import study_figures
 from realpen.errors import ParameterError
-from realpen.stats import report
+from realpen.stats import figure_plan, power_plot, report
+from realpen.stats import figures as study_figures
 from realpen.stats.outcome import StudyAnalysis
 from realpen.stats.results import RESULT_COLUMNS
 
@@ -227,7 +227,7 @@ def rendered(tmp_path_factory) -> dict[str, tuple[StudyAnalysis, list[Path], Pat
     for kind, build in ANALYSES.items():
         analysis = build()
         folder = tmp_path_factory.mktemp(kind)
-        figures = study_figures.save_study_figures(analysis, folder)
+        figures = figure_plan.save_study_figures(analysis, folder)
         out[kind] = (analysis, figures, report.write_report(analysis, folder, figures))
     return out
 
@@ -237,7 +237,7 @@ def rendered(tmp_path_factory) -> dict[str, tuple[StudyAnalysis, list[Path], Pat
 @pytest.mark.parametrize("kind", list(ANALYSES))
 def test_every_figure_is_written_as_valid_png_and_svg(rendered, kind):
     analysis, figures, _ = rendered[kind]
-    assert study_figures.study_figure_names(analysis) == EXPECTED[kind]
+    assert figure_plan.study_figure_names(analysis) == EXPECTED[kind]
     assert [path.name for path in figures] == [f"{name}.{ext}" for name in EXPECTED[kind]
                                                for ext in ("png", "svg")]
     for path in figures:
@@ -279,16 +279,16 @@ def test_missing_tables_are_one_clear_error():
     with pytest.raises(ParameterError, match="analysis: has no confusion table"):
         study_figures.figure10(analysis)
     with pytest.raises(ParameterError, match="formats: unknown image type"):
-        study_figures.save_study_figures(analysis, "unused", formats=["gif89"])
+        figure_plan.save_study_figures(analysis, "unused", formats=["gif89"])
 
 
 def test_power_tables_of_both_shapes_are_understood(rendered):
-    curves, detectable = study_figures.split_power(study1_analysis(count=3).power)
+    curves, detectable = power_plot.split_power(study1_analysis(count=3).power)
     assert len(curves) == 8 and detectable.empty
-    curves, detectable = study_figures.split_power(study2_analysis(count=3).power)
+    curves, detectable = power_plot.split_power(study2_analysis(count=3).power)
     assert curves.empty and list(detectable["effect_size"].fillna(-1)) == [0.18, -1]
     with pytest.raises(ParameterError, match="power table lacks column"):
-        study_figures.split_power(pd.DataFrame({"outcome": ["Q1"], "power": [0.5]}))
+        power_plot.split_power(pd.DataFrame({"outcome": ["Q1"], "power": [0.5]}))
     text = html_of(rendered, "study2")
     assert 'id="power"' in text and "rate_spread" in text and "under-powered" in text
 

@@ -12,7 +12,15 @@ pyplot figures. In a notebook, show a figure by making it the cell's value (``ax
 - :func:`plot_sound_loop` — a sound loop's waveform and spectrogram across its wrap.
 - :func:`profile_figure`, :func:`save_profile_plot` — a pen profile (the plot of ``realpen profile show``).
 
-May import: every library layer (io, dsp, tactile, sound, profile); never live or cli.
+Shared pieces: :mod:`~realpen.display.axes` (axes to draw into, spectrograms, dB),
+:mod:`~realpen.display.charts` (panels, means with intervals, participants' values — what the
+study figures of :mod:`realpen.stats.figures` draw with) and :mod:`~realpen.display.images`
+(image types, reproducible bytes, atomic writes).
+
+May import: :mod:`realpen.errors` and the library layers below it (:mod:`realpen.io`,
+:mod:`realpen.dsp`, :mod:`realpen.tactile`, :mod:`realpen.sound`, :mod:`realpen.profile`);
+never :mod:`realpen.study`, :mod:`realpen.stats`, :mod:`realpen.live` or :mod:`realpen.cli`
+(what knows a study draws in :mod:`realpen.stats`).
 """
 
 from realpen.display.actuator import plot_actuator

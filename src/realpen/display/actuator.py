@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 
-from realpen.display._axes import axes_list, check_views, hz_ticks
+from realpen.display.axes import axes_list, check_views, hz_ticks
 from realpen.errors import ParameterError, require_number
 
 __all__ = ["plot_actuator", "VIEWS"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.axes import Axes
 
-from realpen.display._axes import axes_list, db, side_colorbar
+from realpen.display.axes import axes_list, db, side_colorbar
 
 __all__ = ["plot_analysis"]
 

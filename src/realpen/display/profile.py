@@ -12,7 +12,7 @@ from matplotlib.axes import Axes
 from matplotlib.backend_bases import FigureCanvasBase
 from matplotlib.figure import Figure
 
-from realpen.display._axes import axes_list, db
+from realpen.display.axes import axes_list, db
 from realpen.display.pattern import plot_pattern
 from realpen.errors import fail
 

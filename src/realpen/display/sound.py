@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 
-from realpen.display._axes import axes_list, check_views, cyclic_spectrogram, db, side_colorbar
+from realpen.display.axes import axes_list, check_views, cyclic_spectrogram, db, side_colorbar
 from realpen.errors import require_number
 
 __all__ = ["plot_sound_loop", "VIEWS"]

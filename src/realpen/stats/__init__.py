@@ -5,11 +5,15 @@ library function that does its work (scipy.stats, statsmodels, pingouin).
 
 - :mod:`~realpen.stats.results` — the one shape of every result (the columns of
   ``results.csv``);
+- :mod:`~realpen.stats.long` — checking a long-format table and shaping it into subjects ×
+  cells (shared by every test);
+- :mod:`~realpen.stats.contrasts` — a design's effects, statsmodels' F per effect, sums of
+  squares and sphericity from orthonormal contrasts;
 - :mod:`~realpen.stats.nonparametric` — Friedman (tie-corrected, Kendall's W), Wilcoxon
-  signed-rank with named p-value methods (``exact``, ``r``, ``spss``), the aligned rank
-  transform;
+  signed-rank with named p-value methods (``exact``, ``r``, ``spss``);
 - :mod:`~realpen.stats.anova` — repeated-measures ANOVA (Mauchly, Greenhouse–Geisser and
   Huynh–Feldt, generalised eta squared) and paired pairwise tests (Bonferroni, Holm);
+- :mod:`~realpen.stats.art` — the aligned rank transform for factorial designs;
 - :mod:`~realpen.stats.intervals` — t and bootstrap confidence intervals;
 - :mod:`~realpen.stats.data` — reading and checking a trials CSV, a design's outcomes, each
   participant's cell values;
@@ -17,12 +21,20 @@ library function that does its work (scipy.stats, statsmodels, pingouin).
   with the paper's own choices beside them (``paper_compatible``);
 - :mod:`~realpen.stats.paper`, :mod:`~realpen.stats.texts` — the paper's numbers, the
   methods paragraphs;
+- :mod:`~realpen.stats.figure_data`, :mod:`~realpen.stats.figures`,
+  :mod:`~realpen.stats.power_plot`, :mod:`~realpen.stats.figure_plan` — the study figures:
+  the analysis's tables shaped for drawing, the figures, the power plot, and which figures an
+  analysis gets with their captions and files (drawn with :mod:`realpen.display.charts`);
 - :mod:`~realpen.stats.report`, :mod:`~realpen.stats.outputs` — ``report.html`` and the
   report folder;
 - :mod:`~realpen.stats.simulate`, :mod:`~realpen.stats.power` — simulated participants and
   power.
 
-Figures: :mod:`realpen.display.study_figures`. May import: :mod:`realpen.study`,
-:mod:`realpen.display`, :mod:`realpen.io`, :mod:`realpen.errors`; never :mod:`realpen.live`
+Inside the package the tests build upwards, without cycles: ``long`` and ``contrasts`` →
+``nonparametric`` → ``anova`` → ``art``; ``figure_data`` → ``figures`` / ``power_plot`` →
+``figure_plan`` → ``report``.
+
+May import: :mod:`realpen.study`, :mod:`realpen.display`, :mod:`realpen.tactile` (a design's
+tactile conditions), :mod:`realpen.io`, :mod:`realpen.errors`; never :mod:`realpen.live`
 or :mod:`realpen.cli`. Importing this package imports none of its modules.
 """

@@ -30,9 +30,10 @@ import pandas as pd
 
 from realpen.errors import ParameterError, RealPenError, fail
 from realpen.stats.anova import pairwise, rm_anova
+from realpen.stats.art import aligned_rank_transform
 from realpen.stats.data import Outcome, Trials, cell_values, outcomes
 from realpen.stats.intervals import cell_cis
-from realpen.stats.nonparametric import aligned_rank_transform, friedman
+from realpen.stats.nonparametric import friedman
 from realpen.stats.outcome import CELL_COLUMNS, CONFUSION_COLUMNS, PARTICIPANT_COLUMNS, StudyAnalysis
 from realpen.stats.paper import paper_numbers
 from realpen.stats.results import RESULT_COLUMNS, with_context

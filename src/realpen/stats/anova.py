@@ -17,17 +17,17 @@ from __future__ import annotations
 import itertools
 import math
 import warnings
-from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
 import pingouin as pg
-import scipy.linalg
 import scipy.stats
-from statsmodels.stats.anova import AnovaRM
 from statsmodels.stats.multitest import multipletests
 
 from realpen.errors import ParameterError, require_choice
+from realpen.stats.contrasts import ZERO_FRACTION, anovarm_f, contrast_decomposition, effect_name, effects
+from realpen.stats.long import MAX_FACTORS, balanced_wide, factor_list, safe_long
+from realpen.stats.nonparametric import WILCOXON_METHODS, wilcoxon
 from realpen.stats.results import TEST_COLUMNS, tidy
 from realpen.stats.results import test_row as _result_row  # pytest would collect "test_row"
 
@@ -38,218 +38,8 @@ SPHERICITY_ALPHA = 0.05
 ADJUSTMENTS = ("bonferroni", "holm", "none")
 """The multiplicity adjustments :func:`pairwise` offers."""
 
-_MAX_FACTORS = 3
-_ZERO = 1e-24
-"""Sums of squares below this fraction of Σy² are rounding dust (~1e-31 Σy²), i.e. zero."""
 
-
-# --- shared checks (also used by realpen.stats.nonparametric) ---------------------------------
-
-def _shown_level(value: object) -> str:
-    """A level or subject for a message: strings quoted, numbers bare, numpy scalars unwrapped."""
-    if isinstance(value, np.generic):
-        value = value.item()
-    return repr(value) if isinstance(value, str) else str(value)
-
-
-def _cell_text(factors: Sequence[str], cell: object) -> str:
-    cell = cell if isinstance(cell, tuple) else (cell,)
-    return ", ".join(f"{factor}={_shown_level(level)}" for factor, level in zip(factors, cell))
-
-
-def _levels(column: pd.Series) -> list:
-    """The levels of a column in a fixed order: a Categorical's own order (observed ones only),
-    otherwise sorted (so the order never depends on which participant came first)."""
-    if isinstance(column.dtype, pd.CategoricalDtype):
-        present = set(column.dropna().unique())
-        return [level for level in column.cat.categories if level in present]
-    unique = list(pd.unique(column.dropna()))
-    try:
-        return sorted(unique)
-    except TypeError:
-        return sorted(unique, key=str)
-
-
-def _factor_list(within: str | Sequence[str], *, most: int = _MAX_FACTORS) -> list[str]:
-    factors = [within] if isinstance(within, str) else list(within) if within is not None else []
-    if not factors or not all(isinstance(factor, str) for factor in factors):
-        raise ParameterError("within", f"must be a column name or a list of 1 to {most}, got {within!r}")
-    if len(factors) > most:
-        raise ParameterError("within", f"at most {most} factors are supported, got {len(factors)}")
-    if len(set(factors)) != len(factors):
-        raise ParameterError("within", f"names a factor twice: {factors}")
-    return factors
-
-
-def _check_columns(data: object, *, dv: str, factors: Sequence[str], subject: str) -> None:
-    if not isinstance(data, pd.DataFrame):
-        raise ParameterError("data", f"must be a pandas DataFrame (long format), got {type(data).__name__}")
-    for parameter, names in (("dv", [dv]), ("subject", [subject]), ("within", factors)):
-        for name in names:
-            if name not in data.columns:
-                raise ParameterError(parameter, f"no column {name!r} in data (columns: "
-                                                f"{', '.join(map(str, data.columns))})")
-    if dv in factors or subject in factors or dv == subject:
-        raise ParameterError("within", f"dv, subject and within must be different columns, got dv={dv!r}, "
-                                       f"subject={subject!r}, within={list(factors)}")
-    values = data[dv]
-    if not (pd.api.types.is_numeric_dtype(values) or pd.api.types.is_bool_dtype(values)):
-        raise ParameterError("dv", f"column {dv!r} is not numeric (dtype {values.dtype})")
-    for name in (subject, *factors):
-        missing = data[name].isna()
-        if missing.any():
-            raise ParameterError("data", f"column {name!r} is empty in row {data.index[missing.argmax()]}")
-
-
-def _balanced_wide(data: pd.DataFrame, *, dv: str, within: Sequence[str], subject: str,
-                   min_levels: int = 2) -> pd.DataFrame:
-    """Subjects × cells (columns: a MultiIndex over ``within``, levels in :func:`_levels` order)
-    with exactly one finite value each; anything else is refused naming subject and cell."""
-    factors = list(within)
-    _check_columns(data, dv=dv, factors=factors, subject=subject)
-    levels = [_levels(data[factor]) for factor in factors]
-    for factor, found in zip(factors, levels):
-        if len(found) < min_levels:
-            raise ParameterError("within", f"factor {factor!r} has {len(found)} level(s) "
-                                           f"({', '.join(map(_shown_level, found))}); a test needs at "
-                                           f"least {min_levels}")
-    subjects = _levels(data[subject])
-    if len(subjects) < 2:
-        raise ParameterError("data", f"needs at least 2 subjects in {subject!r}, got {len(subjects)}")
-    values = data[dv].astype(float)
-    bad = ~np.isfinite(values.to_numpy())
-    if bad.any():
-        row = data.loc[bad].iloc[0]
-        raise ParameterError("data", f"{dv!r} is missing or not finite for subject "
-                                     f"{_shown_level(row[subject])} at "
-                                     f"{_cell_text(factors, tuple(row[factors]))}")
-    keys = [subject, *factors]
-    counts = data.groupby(keys, observed=True, sort=False).size()
-    if (counts > 1).any():
-        key = counts.index[int(np.argmax(counts.to_numpy() > 1))]
-        raise ParameterError("data", f"subject {_shown_level(key[0])} has {counts[key]} values at "
-                                     f"{_cell_text(factors, key[1:])} (one per subject and cell expected: "
-                                     f"average repetitions first)")
-    full = pd.MultiIndex.from_product([subjects, *levels], names=keys)
-    if len(counts) < len(full):
-        missing = full.difference(counts.index, sort=False)
-        key = missing[0]
-        raise ParameterError("data", f"subject {_shown_level(key[0])} has no value at "
-                                     f"{_cell_text(factors, key[1:])} (every subject needs every cell)")
-    long = pd.Series(values.to_numpy(), index=pd.MultiIndex.from_frame(data[keys]))
-    wide = long.unstack(factors)
-    if not isinstance(wide.columns, pd.MultiIndex):
-        wide.columns = pd.MultiIndex.from_arrays([wide.columns], names=factors)
-    columns = pd.MultiIndex.from_product(levels, names=factors)
-    return wide.reindex(index=subjects, columns=columns)
-
-
-def _safe_long(wide: pd.DataFrame) -> pd.DataFrame:
-    """``wide`` back to long format with plain column names (``s``, ``f0``.., ``y``) and string
-    level codes: statsmodels builds a formula from the names, so a factor named ``pen type`` or a
-    level ``audio-tactile`` must not reach it."""
-    factors = list(wide.columns.names)
-    frame = wide.copy()
-    frame.index = [f"s{i}" for i in range(len(frame))]
-    frame.columns = pd.MultiIndex.from_tuples(
-        [tuple(f"l{codes[j]:04d}" for j in range(len(factors)))
-         for codes in zip(*[wide.columns.codes[j] for j in range(len(factors))])],
-        names=[f"f{j}" for j in range(len(factors))])
-    long = frame.stack(list(range(len(factors)))).rename("y").reset_index()
-    return long.rename(columns={"level_0": "s"})
-
-
-def _effects(factors: Sequence[str]) -> list[tuple[int, ...]]:
-    """Every main effect and interaction as factor positions, main effects first."""
-    positions = range(len(factors))
-    return [combo for size in range(1, len(factors) + 1) for combo in itertools.combinations(positions, size)]
-
-
-def _effect_name(factors: Sequence[str], effect: tuple[int, ...]) -> str:
-    return ":".join(factors[j] for j in effect)
-
-
-def _anovarm_f(long: pd.DataFrame, n_factors: int) -> dict[tuple[int, ...], tuple[float, ...]]:
-    """statsmodels AnovaRM on a :func:`_safe_long` frame: ``{effect: (F, df1, df2, p)}``."""
-    codes = [f"f{j}" for j in range(n_factors)]
-    table = AnovaRM(long, depvar="y", subject="s", within=codes).fit().anova_table
-    out = {}
-    for effect in _effects(codes):
-        row = table.loc[_effect_name(codes, effect)]
-        out[effect] = tuple(float(row[column]) for column in ("F Value", "Num DF", "Den DF", "Pr > F"))
-    return out
-
-
-# --- sphericity and effect sizes ------------------------------------------------------------
-
-def _hf_from_gg(eps_gg: float, n: int, d: int) -> float:
-    """Huynh–Feldt epsilon from Greenhouse–Geisser's with Lecoutre's (1991) correction, capped at 1.
-
-    ``((N − g + 1)·d·ε − 2) / (d·(N − g − d·ε))`` with g = 1 group of N subjects (car, afex and
-    pingouin.epsilon coincide here: Lecoutre's correction only differs with between-subject groups).
-    """
-    if d <= 1:
-        return 1.0
-    denominator = d * (n - 1 - d * eps_gg)
-    if denominator <= 0:  # too few subjects for the estimate (e.g. 2 subjects, 3 levels)
-        return math.nan
-    return float(min((n * d * eps_gg - 2) / denominator, 1.0))
-
-
-def _mauchly(cov: np.ndarray, df_resid: int, k: int) -> tuple[float, float]:
-    """Mauchly's W and p from the covariance of d orthonormal contrasts (R's ``mauchly.test``
-    with its second-order term, as pingouin.sphericity; ``k`` the number of cells of the effect)."""
-    d = cov.shape[0]
-    f = 1 - (2 * d**2 + d + 2) / (6 * d * df_resid)
-    if df_resid < d or f <= 0:  # a rank-deficient covariance: the test is undefined
-        return math.nan, math.nan
-    sign, logdet = np.linalg.slogdet(cov)
-    log_w = logdet - d * math.log(np.trace(cov) / d) if sign > 0 else -math.inf
-    w2 = (d + 2) * (d - 1) * (d - 2) * (2 * d**3 + 6 * d**2 + 3 * k + 2) / (288 * (df_resid * d * f) ** 2)
-    chi2 = -df_resid * f * log_w
-    ddof = d * (d + 1) / 2 - 1
-    p1, p2 = scipy.stats.chi2.sf(chi2, ddof), scipy.stats.chi2.sf(chi2, ddof + 4)
-    return float(math.exp(log_w)), float(p1 + w2 * (p2 - p1))
-
-
-def _contrast_decomposition(wide: pd.DataFrame) -> dict[tuple[int, ...], dict[str, float]]:
-    """Per effect: sums of squares, Greenhouse–Geisser and Huynh–Feldt epsilon and Mauchly's test,
-    from orthonormal contrasts of the subjects × cells table.
-
-    The contrasts of an effect are the Kronecker product over factors of orthonormal Helmert
-    contrasts (scipy.linalg.helmert) for the factors in the effect and a normalised mean for the
-    others (as R's car/afex, SPSS and pingouin build an interaction's). With z = Y·C (subjects ×
-    d): SS_effect = n·|mean z|², SS_error = Σ|z − mean z|², S = cov(z), and
-    ε_GG = tr(S)² / (d·tr(S²)) (Greenhouse & Geisser 1959; Box 1954), ε_HF from ε_GG
-    (Huynh & Feldt 1976, with Lecoutre 1991), Mauchly (1940) from S. ``()`` holds the subjects'
-    sum of squares.
-    """
-    y = wide.to_numpy(dtype=float)
-    n = y.shape[0]
-    sizes = [len(level) for level in wide.columns.levels]
-    out: dict[tuple[int, ...], dict[str, float]] = {}
-    for effect in [(), *_effects(range(len(sizes)))]:
-        contrast = np.ones((1, 1))
-        for j, k in enumerate(sizes):
-            part = scipy.linalg.helmert(k).T if j in effect else np.full((k, 1), 1 / math.sqrt(k))
-            contrast = np.kron(contrast, part)
-        z = y @ contrast
-        mean = z.mean(axis=0)
-        deviations = z - mean
-        d = z.shape[1]
-        cells = int(np.prod([sizes[j] for j in effect])) if effect else 1
-        entry = {"ss": float(n * mean @ mean), "ss_error": float((deviations**2).sum())}
-        if effect:
-            cov = deviations.T @ deviations / (n - 1)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                # No variation at all gives 0/0: epsilon is undefined (NaN), said by the caller.
-                eps = 1.0 if d <= 1 else float(min(np.trace(cov) ** 2 / (d * np.trace(cov @ cov)),
-                                                   1.0))
-            w, p = (math.nan, math.nan) if d <= 1 else _mauchly(cov, n - 1, cells)
-            entry.update(eps_gg=eps, eps_hf=_hf_from_gg(eps, n, d), mauchly_w=w, p_mauchly=p)
-        out[effect] = entry
-    return out
-
+# --- sphericity and effect sizes from pingouin -----------------------------------------------
 
 def _pingouin_sphericity(long: pd.DataFrame, n_factors: int) -> dict[tuple[int, ...], dict[str, float]]:
     """ges, ε_GG, Mauchly from pingouin.rm_anova and ε_HF from pingouin.epsilon (≤ 2 factors)."""
@@ -263,10 +53,10 @@ def _pingouin_sphericity(long: pd.DataFrame, n_factors: int) -> dict[tuple[int, 
         hf = {effect: float(pg.epsilon(long, dv="y", subject="s", correction="hf",
                                        within=[within[j] for j in effect] if len(effect) > 1
                                        else within[effect[0]]))
-              for effect in _effects(within)}
+              for effect in effects(within)}
     table = table.set_index(table["Source"].astype(str).str.replace(" * ", ":", regex=False))
     out = {}
-    for effect in _effects(range(n_factors)):
+    for effect in effects(range(n_factors)):
         name = ":".join(within[j] for j in effect)
         row = table.loc[name]
         # pingouin drops all-NaN columns (data without variation), hence .get.
@@ -355,15 +145,15 @@ def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subj
     contrast covariance for any number of factors (the path three factors always take; the
     tests check it agrees with pingouin), which saves pingouin's own refits where only F is
     wanted (the aligned rank transform runs one ANOVA per effect)."""
-    factors = _factor_list(within)
-    wide = _balanced_wide(data, dv=dv, within=factors, subject=subject)
-    long = _safe_long(wide)
+    factors = factor_list(within)
+    wide = balanced_wide(data, dv=dv, within=factors, subject=subject)
+    long = safe_long(wide)
     n = len(wide)
     with np.errstate(divide="ignore", invalid="ignore"):
-        # Without within-subject variation F is 0/0 or x/0; _degenerate says which below.
-        f_table = _anovarm_f(long, len(factors))
-        decomposition = _contrast_decomposition(wide)
-    zero = _ZERO * float((wide.to_numpy(dtype=float) ** 2).sum())
+        # Without within-subject variation F is 0/0 or x/0; the rows below say which.
+        f_table = anovarm_f(long, len(factors))
+        decomposition = contrast_decomposition(wide)
+    zero = ZERO_FRACTION * float((wide.to_numpy(dtype=float) ** 2).sum())
     widest = int(np.prod([len(level) - 1 for level in wide.columns.levels]))
     # pingouin's Mauchly divides by zero when subjects are fewer than an effect's contrasts + 1;
     # the contrast path gives NaN there (Mauchly is undefined) and the same numbers otherwise.
@@ -377,7 +167,7 @@ def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subj
         # effect × subject error: the denominator of ges in an all-within design.
         total_error = sum(entry["ss_error"] for entry in decomposition.values())
         extra = {}
-        for effect in _effects(factors):
+        for effect in effects(factors):
             entry = decomposition[effect]
             ges = entry["ss"] / (entry["ss"] + total_error)
             extra[effect] = {"ges": ges, **{key: entry[key] for key in
@@ -386,7 +176,7 @@ def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subj
                   "Huynh-Feldt (Lecoutre) epsilon and Mauchly's test from the covariance of "
                   "orthonormal contrasts")
     rows = []
-    for effect in _effects(factors):
+    for effect in effects(factors):
         f_value, df1, df2, p = f_table[effect]
         info = extra[effect]
         method = source
@@ -400,7 +190,7 @@ def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subj
                                                      if no_effect else "; no error variance: F infinite")
                                     + "; epsilon and Mauchly undefined",
                                     effect_size_name="ges", effect_size=info["ges"],
-                                    effect=_effect_name(factors, effect), eps_gg=math.nan, eps_hf=math.nan,
+                                    effect=effect_name(factors, effect), eps_gg=math.nan, eps_hf=math.nan,
                                     p_gg=p, p_hf=p, mauchly_w=math.nan, p_mauchly=math.nan,
                                     sphericity=False))
             continue
@@ -422,7 +212,7 @@ def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subj
         p_hf = float(scipy.stats.f.sf(f_value, df1 * eps_hf, df2 * eps_hf))
         rows.append(_result_row("RM-ANOVA", "F", f_value, p, n=n, method=method, df1=df1, df2=df2,
                                 effect_size_name="ges", effect_size=info["ges"],
-                                effect=_effect_name(factors, effect), eps_gg=eps_gg, eps_hf=eps_hf,
+                                effect=effect_name(factors, effect), eps_gg=eps_gg, eps_hf=eps_hf,
                                 p_gg=p_gg, p_hf=p_hf, mauchly_w=mauchly_w, p_mauchly=p_mauchly,
                                 sphericity=sphericity))
     return tidy(rows)
@@ -479,17 +269,15 @@ def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: st
         a-c: t = -8.66, p_bonferroni = 0.010
         b-c: t = -2.45, p_bonferroni = 0.275
     """
-    from realpen.stats.nonparametric import WILCOXON_METHODS, wilcoxon
-
     if not isinstance(within, str):
         raise ParameterError("within", f"must be one column name, got {within!r}")
     require_choice("test", test, ("t", "wilcoxon"))
     require_choice("adjust", adjust, ADJUSTMENTS)
     require_choice("wilcoxon_method", wilcoxon_method, WILCOXON_METHODS)
-    others = [] if average_over is None else _factor_list(average_over, most=_MAX_FACTORS)
+    others = [] if average_over is None else factor_list(average_over, most=MAX_FACTORS)
     if within in others:
         raise ParameterError("average_over", f"must not contain the compared factor {within!r}")
-    wide = _balanced_wide(data, dv=dv, within=[within, *others], subject=subject)
+    wide = balanced_wide(data, dv=dv, within=[within, *others], subject=subject)
     means = wide.T.groupby(level=0, sort=False).mean().T
     levels = list(means.columns)
     pairs = list(itertools.combinations(levels, 2))

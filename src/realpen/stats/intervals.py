@@ -14,7 +14,7 @@ import pandas as pd
 import scipy.stats
 
 from realpen.errors import ParameterError, require_choice
-from realpen.stats.anova import _cell_text, _check_columns, _shown_level
+from realpen.stats.long import cell_text, check_columns, shown_level
 
 __all__ = ["mean_ci", "cell_cis", "CI_METHODS"]
 
@@ -150,13 +150,13 @@ def cell_cis(data: pd.DataFrame, *, dv: str, by: list[str], subject: str, confid
         raise ParameterError("by", f"must not contain the subject column {subject!r}")
     _check_confidence(confidence)
     require_choice("method", method, CI_METHODS)
-    _check_columns(data, dv=dv, factors=by, subject=subject)
+    check_columns(data, dv=dv, factors=by, subject=subject)
     values = data[dv].astype(float)
     bad = ~np.isfinite(values.to_numpy())
     if bad.any():
         row = data.loc[bad].iloc[0]
         raise ParameterError("data", f"{dv!r} is missing or not finite for subject "
-                                     f"{_shown_level(row[subject])} at {_cell_text(by, tuple(row[by]))}")
+                                     f"{shown_level(row[subject])} at {cell_text(by, tuple(row[by]))}")
     per_subject = data.assign(**{dv: values}).groupby([*by, subject], observed=True, sort=True)[dv].mean()
     rows = []
     for cell, group in per_subject.groupby(level=list(range(len(by))), observed=True, sort=True):

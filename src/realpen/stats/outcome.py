@@ -1,7 +1,7 @@
 """What a study analysis hands to the report and the figures: :class:`StudyAnalysis`.
 
 The analyses (:mod:`realpen.stats.analyses`) fill it; :mod:`realpen.stats.report` and
-:mod:`realpen.display.study_figures` only read it. Every table is a tidy DataFrame whose columns
+:mod:`realpen.stats.figures` only read it. Every table is a tidy DataFrame whose columns
 are listed below, so the report and the figures never recompute a statistic.
 """
 

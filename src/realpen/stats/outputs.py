@@ -75,7 +75,7 @@ def write_report_folder(analysis: StudyAnalysis, folder: str | os.PathLike) -> l
     Returns:
         the paths written, as they are after the folder took its name.
     """
-    from realpen.display.study_figures import save_study_figures
+    from realpen.stats.figure_plan import save_study_figures
     from realpen.stats.report import write_report
 
     target = check_report_folder(folder, replace=True)

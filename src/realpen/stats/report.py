@@ -1,7 +1,7 @@
 """The self-contained HTML report of a study analysis: ``report.html``.
 
 :func:`write_report` turns a :class:`realpen.stats.outcome.StudyAnalysis` and its figures
-(:func:`realpen.display.study_figures.save_study_figures`) into one HTML file that opens
+(:func:`realpen.stats.figure_plan.save_study_figures`) into one HTML file that opens
 offline and prints: the figures are embedded as ``data:`` URIs, the style is a ``<style>``
 block, and nothing refers to another file or to the network. Every value that comes from the
 data (participant codes, outcome names, notes, the source's name) is escaped.
@@ -24,9 +24,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from realpen.display.study_figures import figure_caption, split_power, study_figure_names
 from realpen.errors import ParameterError, fail
 from realpen.io.files import atomic_path
+from realpen.stats.figure_plan import figure_caption, study_figure_names
+from realpen.stats.power_plot import split_power
 from realpen.stats.results import PAPER_COMPATIBLE, RESULT_COLUMNS
 from realpen.stats.texts import software_versions
 
@@ -439,7 +440,7 @@ def write_report(analysis, directory: str | os.PathLike,
     Args:
         analysis: a :class:`realpen.stats.outcome.StudyAnalysis`.
         directory: the folder to write into (made if missing).
-        figures: the figure files to embed, as :func:`realpen.display.study_figures.
+        figures: the figure files to embed, as :func:`realpen.stats.figure_plan.
             save_study_figures` returns them (shown in this order, captioned by name).
 
     Returns:
