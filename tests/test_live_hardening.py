@@ -28,9 +28,10 @@ from fastapi.testclient import TestClient  # noqa: E402
 from websockets.sync.client import connect  # noqa: E402
 
 from realpen.errors import RealPenError  # noqa: E402
-from realpen.live.app import DEVICE_LOG_PAGE, LiveSettings, create_app  # noqa: E402
+from realpen.live.app import LiveSettings, create_app  # noqa: E402
 from realpen.live.auth import CONTENT_SECURITY_POLICY, content_security_policy  # noqa: E402
 from realpen.live.device import CommandLog, Origin  # noqa: E402
+from realpen.live.routes.device import DEVICE_LOG_PAGE  # noqa: E402
 from realpen.live.server import bind, server_config  # noqa: E402
 from realpen.live.store import StrokeStore  # noqa: E402
 from realpen.profile import resolve_profile  # noqa: E402
@@ -181,7 +182,7 @@ def test_a_refused_second_store_leaves_the_first_untouched(tmp_path):
 
 
 def test_writes_that_cannot_begin_fail_and_later_ones_succeed(tmp_path, monkeypatch):
-    from realpen.live import store as store_module
+    from realpen.study import db as store_module
 
     monkeypatch.setattr(store_module, "BUSY_TIMEOUT_MS", 200)
     path = tmp_path / "s.sqlite3"

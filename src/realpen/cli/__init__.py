@@ -1,13 +1,18 @@
 """The ``realpen`` command: argument parsing and the flag map only, a thin shell over the library.
 
-Every subcommand lives in its own module and registers itself on :data:`app`. Problems with the
-user's input surface as :class:`realpen.errors.RealPenError` and are printed as one line on
-stderr with exit code 2; a :class:`realpen.errors.ParameterError` (worded with a Python
-parameter name) is shown with the command's flag instead (:mod:`realpen.cli.flags`).
+Every group of subcommands lives in a module of its own (``*_cmds.py``) with a
+``register(app)`` function; :mod:`realpen.cli.root` builds the root :data:`app` and calls them,
+and no command module imports the root or this package's names back. :func:`main`, the console
+script, runs the app: problems with the user's input surface as
+:class:`realpen.errors.RealPenError` and are printed as one line on stderr with exit code 2; a
+:class:`realpen.errors.ParameterError` (worded with a Python parameter name) is shown with the
+command's flag instead (:mod:`realpen.cli.flags`).
 
-May import: typer, rich and :mod:`realpen.errors` at module level; numpy, scipy, soundfile,
-matplotlib, FastAPI and the rest of the library only inside the command functions, so that
-``realpen --help`` answers at once.
+May import: at module level typer, rich, the standard library and the light modules that load
+nothing heavy (:mod:`realpen.errors`, :mod:`realpen.io.paths`); every other layer of the
+library (:mod:`realpen.live` included) with numpy, scipy, soundfile, matplotlib and FastAPI only
+inside the command functions, so that ``realpen --help`` answers at once. No library layer
+imports :mod:`realpen.cli` (only ``python -m realpen`` runs it).
 """
 
 from __future__ import annotations
@@ -22,45 +27,11 @@ try:  # recent typer releases carry their own copy of click
 except ImportError:  # older typer uses click itself
     from click import exceptions as click_errors
 
+from realpen.cli.common import CONTEXT_SETTINGS
+from realpen.cli.root import app
 from realpen.errors import ParameterError, RealPenError
 
-__all__ = ["app", "sub_app", "main", "command_path", "CONTEXT_SETTINGS"]
-
-# -h works wherever --help does; child contexts inherit it, sub_app repeats it to be plain.
-CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"]}
-
-app = typer.Typer(
-    name="realpen",
-    help="RealPen: the feel and sound of a real pen on paper, for touch screens.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-    context_settings=CONTEXT_SETTINGS,
-)
-
-
-def _show_version(value: bool) -> None:
-    if value:
-        from realpen import __version__
-
-        print(f"realpen {__version__}")
-        raise typer.Exit()
-
-
-@app.callback()
-def _root(
-    version: bool = typer.Option(False, "--version", callback=_show_version, is_eager=True,
-                                 help="Print the version and exit."),
-) -> None:
-    """RealPen: the feel and sound of a real pen on paper, for touch screens."""
-
-
-def sub_app(name: str, help: str) -> typer.Typer:
-    """A group of subcommands, ``realpen NAME ...``, registered on :data:`app`; it prints its
-    help when given no subcommand."""
-    group = typer.Typer(help=help, no_args_is_help=True, context_settings=CONTEXT_SETTINGS)
-    app.add_typer(group, name=name)
-    return group
+__all__ = ["app", "main", "command_path", "CONTEXT_SETTINGS"]
 
 
 def command_path(args: Sequence[str]) -> str:
@@ -141,14 +112,3 @@ def _fail(message: str, code: int) -> None:
     print(f"realpen: error: {' '.join(message.split())}", file=sys.stderr)
     sys.exit(code)
 
-
-# Subcommand modules register themselves on `app` when imported; they import nothing heavy.
-from realpen.cli import tactile_cmds  # noqa: E402,F401,I001
-from realpen.cli import sound_cmds  # noqa: E402,F401
-from realpen.cli import profile_cmds  # noqa: E402,F401
-from realpen.cli import serve_cmds  # noqa: E402,F401
-from realpen.cli import export_cmds  # noqa: E402,F401
-from realpen.cli import hatt_cmds  # noqa: E402,F401
-from realpen.cli import study_cmds  # noqa: E402,F401
-from realpen.cli import stats_cmds  # noqa: E402,F401
-from realpen.cli import device_cmds  # noqa: E402,F401

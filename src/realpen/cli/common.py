@@ -1,4 +1,5 @@
-"""Shared pieces of the command line: console output, progress bars, and the output check."""
+"""Shared pieces of the command line: command groups, console output, progress bars, and the
+output check."""
 
 from __future__ import annotations
 
@@ -18,15 +19,17 @@ try:  # recent typer releases carry their own copy of click
 except ImportError:  # pragma: no cover - every supported typer has it
     from typer.main import TyperGroup
 
-__all__ = ["console", "err_console", "PROGRESS_AFTER_S", "progress_bar", "force_option",
-           "check_outputs", "same_file", "whole_number", "design_input", "working",
-           "terminate_as_interrupt", "DefaultCommandGroup"]
+__all__ = ["CONTEXT_SETTINGS", "command_group", "console", "err_console", "PROGRESS_AFTER_S",
+           "progress_bar", "force_option", "check_outputs", "same_file", "whole_number",
+           "design_input", "working", "terminate_as_interrupt", "DefaultCommandGroup"]
 
 # Markup off: paths, tool names and descriptions are the user's text, not rich markup.
 console = Console(soft_wrap=True, markup=False, highlight=False)
 err_console = Console(stderr=True, markup=False, highlight=False)
 
 PROGRESS_AFTER_S = 5.0  # recordings longer than this get a progress bar
+# -h works wherever --help does; child contexts inherit it, each group repeats it to be plain.
+CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"]}
 
 
 class DefaultCommandGroup(TyperGroup):
@@ -41,6 +44,20 @@ class DefaultCommandGroup(TyperGroup):
         if args and args[0] not in self.commands and args[0] not in ("-h", "--help"):
             args = [self.default_command, *args]
         return super().parse_args(ctx, args)
+
+
+def command_group(help: str, cls: type[TyperGroup] | None = None) -> typer.Typer:
+    """A group of subcommands (``realpen NAME ...``) that prints its help when given no
+    subcommand. It is not registered anywhere: its module's ``register(app)`` adds it to the
+    root command (:mod:`realpen.cli.root`).
+
+    Args:
+        help: the group's help text.
+        cls: the click group class (a :class:`DefaultCommandGroup` to run a default command).
+    """
+    options = {} if cls is None else {"cls": cls}
+    return typer.Typer(help=help, no_args_is_help=True, context_settings=CONTEXT_SETTINGS,
+                       **options)
 
 
 def force_option(*names: str) -> bool:

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import sub_app
 from realpen.cli.common import (
     check_outputs,
+    command_group,
     console,
     force_option,
     progress_bar,
@@ -29,9 +29,11 @@ from realpen.cli.common import (
 )
 from realpen.errors import ParameterError, RealPenError, fail, require_number
 
-device_app = sub_app(
-    "device", "The pen: find it, show what it is, upload a profile's pattern, play, stop, ping "
-              "and watch it; 'device sim' runs the pen's real firmware on a pseudo-terminal.")
+__all__ = ["device_app", "register"]
+
+device_app = command_group(
+    "The pen: find it, show what it is, upload a profile's pattern, play, stop, ping and watch "
+    "it; 'device sim' runs the pen's real firmware on a pseudo-terminal.")
 
 PORT_ENV = "REALPEN_PORT"
 PORT_HELP = (f"The pen: a serial device (/dev/ttyACM0, COM3, a /dev/pts/N of 'realpen device "
@@ -390,3 +392,8 @@ def _check_writable_folder(flag: str, path: Path) -> None:
         raise fail(path, f"{flag}: cannot create a file in {folder} ({why})") from None
     os.close(handle)
     os.unlink(probe)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``realpen device`` to the root command."""
+    app.add_typer(device_app, name="device")

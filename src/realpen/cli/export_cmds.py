@@ -10,14 +10,12 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import app
 from realpen.cli.common import check_outputs, console, force_option, whole_number
 
 # realpen.exports.FORMATS, written out so that help needs no numpy; a test checks they agree.
 FORMAT_NAMES = ("wav", "c-header", "ahap", "haptic", "android", "hjif")
 
 
-@app.command()
 def export(
     profile: str = typer.Argument(..., help="Profile name (pencil, ballpoint, marker, …) or a "
                                             "bundle folder or .zip."),
@@ -55,3 +53,8 @@ def export(
         console.print(f"wrote {companion}")
     for limit in written.export.limits:
         console.print(f"note: {fmt} cannot carry: {limit}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``realpen export`` to the root command."""
+    app.command()(export)

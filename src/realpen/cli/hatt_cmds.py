@@ -10,12 +10,13 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import sub_app
-from realpen.cli.common import check_outputs, console, force_option, whole_number
+from realpen.cli.common import check_outputs, command_group, console, force_option, whole_number
 from realpen.errors import fail
 
-hatt_app = sub_app("hatt", "HaTT texture models (Models_<texture>.xml): the (speed, force) grid, "
-                           "and stylus vibration synthesised from it.")
+__all__ = ["hatt_app", "register"]
+
+hatt_app = command_group("HaTT texture models (Models_<texture>.xml): the (speed, force) grid, "
+                         "and stylus vibration synthesised from it.")
 
 MODEL_HELP = "A HaTT model file, e.g. 'Models_Book.xml'."
 SUFFIXES = (".wav", ".npz")
@@ -103,3 +104,8 @@ def synth(
         if not lo <= value <= hi:
             console.print(f"note: {name} {value:g} {unit} is outside the modelled "
                           f"{lo:g}–{hi:g} {unit}; the model at the edge was used")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``realpen hatt`` to the root command."""
+    app.add_typer(hatt_app, name="hatt")

@@ -11,13 +11,21 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import sub_app
-from realpen.cli.common import PROGRESS_AFTER_S, check_outputs, console, force_option, progress_bar
+from realpen.cli.common import (
+    PROGRESS_AFTER_S,
+    check_outputs,
+    command_group,
+    console,
+    force_option,
+    progress_bar,
+)
 from realpen.cli.sound_cmds import CROSSFADE_MS, UNIT_MS
 from realpen.cli.tactile_cmds import model_option, model_options
 from realpen.errors import RealPenError
 
-profile_app = sub_app("profile", "Pen profiles: build, list and show.")
+__all__ = ["profile_app", "register"]
+
+profile_app = command_group("Pen profiles: build, list and show.")
 
 
 @profile_app.command("build")
@@ -204,3 +212,8 @@ def profile_lines(profile) -> list[str]:
                  f"triangles; the table is point {grid.reference} at "
                  f"{xy[grid.reference, 0]:.4g} mm/s, {xy[grid.reference, 1]:.3g} N")
     return lines
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``realpen profile`` to the root command."""
+    app.add_typer(profile_app, name="profile")

@@ -8,10 +8,11 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import app, sub_app
-from realpen.cli.common import check_outputs, console, force_option
+from realpen.cli.common import check_outputs, command_group, console, force_option
 from realpen.errors import ParameterError, RealPenError, require_choice
 from realpen.io.paths import default_store
+
+__all__ = ["strokes_app", "serve", "register"]
 
 TACTILE_CHOICES = ("audio", "none")
 DEVICE_WAIT_S = 3.0  # how long the summary waits for the pen's first connection attempt
@@ -26,7 +27,7 @@ LAN_TOKEN_FILE = "lan-token"  # in the data folder: the LAN token a restarted se
 STORE_HELP = ("The store: an SQLite file (default: strokes.sqlite3 in the data folder) or a "
               "PostgreSQL URL, postgresql://USER:PASSWORD@HOST/DATABASE.")
 
-strokes_app = sub_app("strokes", "The strokes the live app stored.")
+strokes_app = command_group("The strokes the live app stored.")
 
 
 def _is_loopback(host: str) -> bool:
@@ -42,7 +43,6 @@ def _interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
-@app.command()
 def serve(
     host: str | None = typer.Option(
         None, "--host", help="Address to listen on (default 127.0.0.1; with --lan 0.0.0.0)."),
@@ -176,3 +176,9 @@ def export(
     strokes, rows = export_csv(store, output, stroke)
     console.print(f"wrote {output}: {rows} samples of {strokes} strokes from "
                   f"{hide_password(store)}", highlight=False)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``realpen strokes`` and ``realpen serve`` to the root command."""
+    app.add_typer(strokes_app, name="strokes")
+    app.command()(serve)

@@ -10,12 +10,18 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import sub_app
-from realpen.cli.common import check_outputs, console, force_option, progress_bar, whole_number
+from realpen.cli.common import (
+    check_outputs,
+    command_group,
+    console,
+    force_option,
+    progress_bar,
+    whole_number,
+)
 from realpen.errors import RealPenError
 
-sound_app = sub_app("sound", "Friction sound: seamless loop units, the pressure/speed coupling "
-                             "(Eq. 1), and what a stroke sounds like.")
+sound_app = command_group("Friction sound: seamless loop units, the pressure/speed coupling "
+                          "(Eq. 1), and what a stroke sounds like.")
 
 # Defaults and limits of realpen.sound.loop and realpen.sound.granular (UNIT_MS, CROSSFADE_MS,
 # DEFAULT_RATE, MIN_RATE, MAX_RATE, REFERENCE_DBFS, GRAIN_MS, LENGTH_MS, MAX_LENGTH_MS), written
@@ -203,3 +209,8 @@ def fit(
                   f"{result.rmse:.4g}, R² {result.r2:.4f}")
     if json_out is not None:
         console.print(f"wrote {json_out}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``realpen sound`` to the root command."""
+    app.add_typer(sound_app, name="sound")

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import CONTEXT_SETTINGS, app
 from realpen.cli.common import (
     DefaultCommandGroup,
     check_outputs,
+    command_group,
     console,
     design_input,
     force_option,
@@ -26,6 +26,8 @@ from realpen.cli.common import (
     working,
 )
 from realpen.errors import RealPenError
+
+__all__ = ["stats_app", "register"]
 
 DESIGN_HELP = "A built-in design (study1, study2) or a design file (.yaml, .yml, .json)."
 
@@ -75,11 +77,9 @@ def _power_sims(value: int) -> int:
     return value
 
 
-stats_app = typer.Typer(
-    cls=_ReportByDefault, no_args_is_help=True, context_settings=CONTEXT_SETTINGS,
-    help="The studies' statistics: `realpen stats DESIGN trials.csv -o REPORT_DIR` (the "
-         "report), or `realpen stats power DESIGN --participants 8 12 16` (before a study).")
-app.add_typer(stats_app, name="stats")
+stats_app = command_group(
+    "The studies' statistics: `realpen stats DESIGN trials.csv -o REPORT_DIR` (the report), or "
+    "`realpen stats power DESIGN --participants 8 12 16` (before a study).", cls=_ReportByDefault)
 
 
 @stats_app.command("report")
@@ -196,7 +196,7 @@ def power(
 
     check_outputs(plot, force=force, inputs=design_input(design))
     if plot is not None:
-        from realpen.display.study_figures import image_kind
+        from realpen.display.images import image_kind
 
         image_kind(plot)
     loaded = load_design(design)
@@ -206,7 +206,7 @@ def power(
                             progress=progress)
     print("\n".join(power_lines(table)), flush=True)
     if plot is not None:
-        from realpen.display.study_figures import save_power_plot
+        from realpen.stats.power_plot import save_power_plot
 
         save_power_plot(table, plot)
         console.print(f"wrote {plot}")
@@ -260,3 +260,8 @@ def simulate(
         export_trials(store, output, design=loaded.name)
     console.print(f"wrote {output}: {participants} simulated participant"
                   f"{'s' if participants != 1 else ''} of {loaded.name}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``realpen stats`` to the root command."""
+    app.add_typer(stats_app, name="stats")

@@ -14,10 +14,18 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import sub_app
-from realpen.cli.common import check_outputs, console, design_input, force_option, whole_number
+from realpen.cli.common import (
+    check_outputs,
+    command_group,
+    console,
+    design_input,
+    force_option,
+    whole_number,
+)
 
-study_app = sub_app("study", "User studies: designs, counterbalanced plans, export of the answers.")
+__all__ = ["study_app", "register"]
+
+study_app = command_group("User studies: designs, counterbalanced plans, export of the answers.")
 
 DESIGN_HELP = "A built-in design (study1, study2) or a design file (.yaml, .yml, .json)."
 
@@ -120,3 +128,8 @@ def export(
                   f"({summary.participants} participants)"
                   + (f"; {strokes}: {summary.samples} samples of {summary.strokes} strokes"
                      if strokes is not None else ""), highlight=False)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``realpen study`` to the root command."""
+    app.add_typer(study_app, name="study")

@@ -11,11 +11,11 @@ from pathlib import Path
 
 import typer
 
-from realpen.cli import CONTEXT_SETTINGS, app
 from realpen.cli.common import (
     PROGRESS_AFTER_S,
     DefaultCommandGroup,
     check_outputs,
+    command_group,
     console,
     force_option,
     progress_bar,
@@ -59,15 +59,12 @@ class _BuildByDefault(DefaultCommandGroup):
     default_command = "build"
 
 
-tactile_app = typer.Typer(
-    cls=_BuildByDefault, no_args_is_help=True, context_settings=CONTEXT_SETTINGS,
-    help="Tactile patterns: `realpen tactile RECORDING -o pattern.wav` (build, the default) "
-         "makes a recording's looping pattern; `realpen tactile render PROFILE --trajectory "
-         "STROKE.csv -o out.wav` gives the feel along a stroke.")
-app.add_typer(tactile_app, name="tactile")
+tactile_app = command_group(
+    "Tactile patterns: `realpen tactile RECORDING -o pattern.wav` (build, the default) makes a "
+    "recording's looping pattern; `realpen tactile render PROFILE --trajectory STROKE.csv -o "
+    "out.wav` gives the feel along a stroke.", cls=_BuildByDefault)
 
 
-@app.command()
 def analyze(
     recording: Path = typer.Argument(..., help="Vibration recording: WAV/FLAC, CSV or NPZ."),
     unit_ms: float = typer.Option(100.0, "--unit-ms", help="Unit sequence length in ms."),
@@ -255,3 +252,9 @@ def render(
                   f"{points} pattern{'s' if points != 1 else ''} "
                   f"({'following speed and force' if points > 1 else 'one loop'}), peak "
                   f"{float(np.max(np.abs(samples), initial=0.0)):.3f}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``realpen tactile`` and ``realpen analyze`` to the root command."""
+    app.add_typer(tactile_app, name="tactile")
+    app.command()(analyze)

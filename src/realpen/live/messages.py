@@ -34,8 +34,9 @@ normalised 0–1 (a mouse reports the constant 0.5); ``tilt_x``, ``tilt_y`` in d
 one stroke-sample definition, :class:`realpen.io.strokes.StrokeSample` (:class:`Sample` is that
 class), which the stroke store and stroke rendering use as well.
 
-This module imports pydantic, :mod:`realpen.io.strokes` and the profile schema's name rule
-only: loading the WebSocket schema loads neither scipy nor soundfile.
+This module imports pydantic, :mod:`realpen.io.strokes`, the profile schema's name rule,
+:mod:`realpen.errors` and :mod:`realpen.validation` only: loading the WebSocket schema loads
+neither scipy nor soundfile.
 """
 
 from __future__ import annotations
@@ -45,8 +46,10 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
+from realpen.errors import RealPenError
 from realpen.io.strokes import StrokeSample, Time
 from realpen.profile.schema import NAME_PATTERN  # pydantic-only: the name rule's one home
+from realpen.validation import validation_line
 
 __all__ = ["PROTOCOL", "MAX_MESSAGE_BYTES", "MAX_SAMPLES", "MODALITIES", "NAME_PATTERN",
            "PAGE_PATTERN",
@@ -163,8 +166,14 @@ class Error(_Message):
     message: str
 
 
-class MessageError(Exception):
-    """A message that cannot be accepted; becomes an :class:`Error` reply."""
+class MessageError(RealPenError):
+    """A message that cannot be accepted; becomes an :class:`Error` reply.
+
+    Attributes:
+        code: the reply's ``code`` (:data:`ErrorCode`).
+        message: what is wrong, on one line.
+        seq: the refused message's ``seq``, when it could be read.
+    """
 
     def __init__(self, code: str, message: str, seq: int | None = None):
         super().__init__(message)
@@ -201,10 +210,9 @@ def parse_message(raw: str | bytes, limit: int = MAX_MESSAGE_BYTES):
     try:
         return CLIENT_MESSAGE.validate_json(raw)
     except ValidationError as error:
-        first = error.errors(include_url=False)[0]
-        if first["type"] == "json_invalid":
-            detail = first.get("ctx", {}).get("error", "")
+        problems = error.errors(include_url=False, include_input=False)
+        if problems and problems[0]["type"] == "json_invalid":
+            detail = problems[0].get("ctx", {}).get("error", "")
             raise MessageError("invalid_json", f"not valid JSON ({detail})") from None
-        where = ".".join(str(part) for part in first["loc"])
-        text = f"{where}: {first['msg']}" if where else first["msg"]
-        raise MessageError("invalid_message", text, _salvage_seq(raw)) from None
+        raise MessageError("invalid_message", validation_line(problems),
+                           _salvage_seq(raw)) from None

@@ -38,7 +38,8 @@ from realpen.live.messages import (
     Samples,
     parse_message,
 )
-from realpen.live.store import STORE_ERRORS, StrokeStore, error_line
+from realpen.live.store import StrokeStore
+from realpen.study.db import STORE_ERRORS, error_line
 
 __all__ = ["Session", "OpenStroke", "TACTILE_MODALITIES"]
 

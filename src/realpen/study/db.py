@@ -44,12 +44,15 @@ except ImportError:  # pragma: no cover
     fcntl = None
 
 __all__ = ["Database", "open_database", "store_file", "hide_password", "head_revision",
-           "SQLITE_USER_VERSION", "BUSY_TIMEOUT_MS", "MIGRATIONS"]
+           "SQLITE_USER_VERSION", "BUSY_TIMEOUT_MS", "MIGRATIONS", "STORE_ERRORS", "error_line"]
 
 SQLITE_USER_VERSION = 3
 """``PRAGMA user_version`` of a migrated SQLite store (1 and 2: the stroke store before Alembic)."""
 BUSY_TIMEOUT_MS = 5000
 """How long an SQLite statement waits for another process's lock (ms)."""
+STORE_ERRORS = (SQLAlchemyError, sqlite3.Error)
+"""What an operation on an open store may fail with when the database cannot do it (the
+driver's errors come wrapped by SQLAlchemy; ``sqlite3.Error`` from code that uses the driver)."""
 CONNECT_TIMEOUT_S = 10
 """How long opening a PostgreSQL connection may take (s)."""
 MIGRATIONS = Path(__file__).with_name("migrations")
@@ -70,6 +73,16 @@ _UPGRADE_FROM_1 = (
     "WHERE id NOT IN (SELECT MIN(id) FROM strokes GROUP BY session, page_stroke)",
     "CREATE UNIQUE INDEX IF NOT EXISTS strokes_by_page ON strokes (page, page_stroke)",
 )
+
+
+def error_line(error: BaseException) -> str:
+    """A store error in one line: the driver's message (SQLAlchemy's wrapper adds the SQL, its
+    parameters and a link on further lines).
+
+    >>> error_line(sqlite3.OperationalError("database is locked"))
+    'database is locked'
+    """
+    return " ".join(str(getattr(error, "orig", None) or error).split())
 
 
 @dataclass(eq=False)

@@ -1,7 +1,7 @@
 """Running a study session: create or resume, the next trial, answers, progress, state.
 
 Every function here that takes ``conn`` is a store operation: it runs inside one transaction of
-the store's writer (:meth:`realpen.live.store.StrokeStore.submit`), and its result reaches the
+the store's writer (:meth:`realpen.live.writer.BatchWriter.submit`), and its result reaches the
 caller only once that transaction is committed. That is what makes an answer durable before it
 is acknowledged, and what makes a second answer to a trial impossible: the check that the trial
 is unanswered and the write happen in one transaction, on one writer, and the primary key of
@@ -13,9 +13,12 @@ created (from :func:`realpen.study.plan.participant_plan`), so the plan a partic
 never changes, even if the design file does later: the design itself is stored with the session's
 study (``studies.design``), and resuming reads that copy.
 
-Problems a caller can fix are :class:`StudyError` with an HTTP-like ``status``: 404 (no such
-session or trial), 409 (answered already, not the next trial, finished) and 422 (an invalid
-answer or request), each with a one-line ``detail``.
+Problems a caller can fix are a :class:`StudyError` of one of four kinds, each with a one-line
+``detail``: :class:`StudyNotFound` (no such session or trial), :class:`StudyConflict` (answered
+already, not the next trial, finished), :class:`StudyInvalid` (an invalid answer or request) and
+:class:`StudyUnavailable` (the store cannot do it now; asking again may work). All are
+:class:`~realpen.errors.RealPenError` subclasses that know nothing of HTTP: the live app turns
+each kind into its status in one place (:mod:`realpen.live.errors`).
 """
 
 from __future__ import annotations
@@ -29,11 +32,13 @@ from typing import Any
 
 from sqlalchemy import Connection, and_, case, func, insert, select, text, update
 
+from realpen.errors import RealPenError
 from realpen.study.design import Design
 from realpen.study.plan import PlannedTrial, participant_plan
 from realpen.study.tables import SESSION_STATES, answers, participants, sessions, studies, trials
 
-__all__ = ["StudyError", "storable", "SessionRequest", "DesignCache", "LIVE_MODALITY", "MAX_RT_MS",
+__all__ = ["StudyError", "StudyNotFound", "StudyConflict", "StudyInvalid", "StudyUnavailable",
+           "storable", "SessionRequest", "DesignCache", "LIVE_MODALITY", "MAX_RT_MS",
            "MAX_CODE_CHARS", "open_session", "next_trial", "answer_trial", "progress",
            "list_sessions", "set_state", "trial_plan", "trial_exists", "trial_answered", "pen_profile",
            "design_summary", "now"]
@@ -59,13 +64,36 @@ def storable(text: str) -> bool:
     return True
 
 
-class StudyError(Exception):
-    """A request the study cannot take: ``status`` 404, 409 or 422, a one-line ``detail``, and
-    ``extra`` fields for the reply (the stored answer of a 409, the next trial)."""
+class StudyError(RealPenError):
+    """A request the study cannot take. Raised as one of its kinds (the subclasses below).
 
-    def __init__(self, status: int, detail: str, **extra: Any):
+    Attributes:
+        detail: what is wrong, on one line (it names the field or the trial).
+        extra: further fields for the reply (the stored answer of a trial answered already,
+            the ``next`` trial).
+    """
+
+    def __init__(self, detail: str, **extra: Any):
         super().__init__(detail)
-        self.status, self.detail, self.extra = status, detail, extra
+        self.detail, self.extra = detail, extra
+
+
+class StudyNotFound(StudyError):
+    """No such session, trial or design."""
+
+
+class StudyConflict(StudyError):
+    """The request disagrees with what is stored: a trial answered already, not the next
+    trial, a finished session, a write another server made first."""
+
+
+class StudyInvalid(StudyError):
+    """An invalid request or answer (the detail names the field or the question)."""
+
+
+class StudyUnavailable(StudyError):
+    """The store cannot do it now (no answer in time, a lost connection); asking again may
+    work."""
 
 
 def now() -> str:
@@ -97,29 +125,29 @@ class SessionRequest:
         code = self.participant
         if not isinstance(code, str) or not code.strip() or len(code) > MAX_CODE_CHARS or \
                 not code.isprintable():
-            raise StudyError(422, f"participant: give an ID of 1 to {MAX_CODE_CHARS} printable "
-                                  f"characters (e.g. P07)")
+            raise StudyInvalid(f"participant: give an ID of 1 to {MAX_CODE_CHARS} printable "
+                               f"characters (e.g. P07)")
         if not isinstance(self.site, str) or len(self.site) > MAX_SITE_CHARS or \
                 not self.site.isprintable():
-            raise StudyError(422, f"site: at most {MAX_SITE_CHARS} printable characters")
+            raise StudyInvalid(f"site: at most {MAX_SITE_CHARS} printable characters")
         if self.index is not None and not 0 <= self.index < 1_000_000:
-            raise StudyError(422, "index: must be between 0 and 999,999")
+            raise StudyInvalid("index: must be between 0 and 999,999")
         if self.seed is not None and not 0 <= self.seed < 2**63:
-            raise StudyError(422, "seed: must be between 0 and 2^63 - 1")
+            raise StudyInvalid("seed: must be between 0 and 2^63 - 1")
         age = self.demographics.get("age")
         if age is not None and (isinstance(age, bool) or not isinstance(age, int)
                                 or not 0 < age < 150):
-            raise StudyError(422, "demographics.age: must be a whole number of years (1-149)")
+            raise StudyInvalid("demographics.age: must be a whole number of years (1-149)")
         for name in ("gender", "handedness"):
             value = self.demographics.get(name)
             if value is not None and (not isinstance(value, str) or len(value) > 100
                                       or not storable(value)):
-                raise StudyError(422, f"demographics.{name}: at most 100 characters of text "
-                                      f"(no NUL, no unpaired surrogate)")
+                raise StudyInvalid(f"demographics.{name}: at most 100 characters of text "
+                                   f"(no NUL, no unpaired surrogate)")
         unknown = set(self.demographics) - {"age", "gender", "handedness"}
         if unknown:
-            raise StudyError(422, f"demographics: unknown field '{sorted(unknown)[0]}' (age, "
-                                  f"gender, handedness)")
+            raise StudyInvalid(f"demographics: unknown field '{sorted(unknown)[0]}' (age, "
+                               f"gender, handedness)")
 
 
 class DesignCache:
@@ -188,7 +216,7 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
         (the session's :func:`progress`, whether it was created now).
 
     Raises:
-        StudyError: 422 for missing consent, or a plan row another session of the design uses.
+        StudyInvalid: missing consent, or a plan row another session of the design uses.
     """
     code = request.participant.strip()
     if conn.dialect.name == "postgresql":
@@ -200,8 +228,8 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
     if existing is not None:
         return progress(conn, existing, cache), False
     if design.participant_fields.consent and request.consent is not True:
-        raise StudyError(422, f"consent: the design '{design.name}' asks for the participant's "
-                              f"consent before the session starts")
+        raise StudyInvalid(f"consent: the design '{design.name}' asks for the participant's "
+                           f"consent before the session starts")
     study_id = _study_id(conn, design)
     used = _used_rows(conn, design.name)
     if request.index is None:
@@ -209,8 +237,8 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
     else:
         index = request.index
         if index in used:
-            raise StudyError(422, f"index: plan row {index} is used by another session of "
-                                  f"'{design.name}'")
+            raise StudyInvalid(f"index: plan row {index} is used by another session of "
+                               f"'{design.name}'")
     seed = design.seed if request.seed is None else request.seed
     plan = participant_plan(design, index, seed)
     created = now()
@@ -234,7 +262,7 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
 def _session_row(conn: Connection, session_id: int):
     row = conn.execute(_session_rows().where(sessions.c.id == session_id)).mappings().first()
     if row is None:
-        raise StudyError(404, f"no session {session_id}")
+        raise StudyNotFound(f"no session {session_id}")
     return row
 
 
@@ -285,7 +313,7 @@ def progress(conn: Connection, session_id: int, cache: DesignCache) -> dict:
     """A session's progress: state, trials answered of planned, the next trial, per block.
 
     Raises:
-        StudyError: 404 when there is no such session.
+        StudyNotFound: there is no such session.
     """
     row = _session_row(conn, session_id)
     blocks, first_open = _blocks(conn, [session_id])
@@ -307,13 +335,13 @@ def trial_plan(conn: Connection, session_id: int, n: int,
     """A session's planned trial ``n`` and the session's design.
 
     Raises:
-        StudyError: 404 for no such session or trial.
+        StudyNotFound: no such session or trial.
     """
     row = _session_row(conn, session_id)
     plan = conn.execute(select(trials.c.plan).where(
         trials.c.session_id == session_id, trials.c.n == n)).scalar()
     if plan is None:
-        raise StudyError(404, f"session {session_id} has no trial {n}")
+        raise StudyNotFound(f"session {session_id} has no trial {n}")
     return _planned(plan), cache.get(conn, row["study_id"])
 
 
@@ -358,7 +386,7 @@ def next_trial(conn: Connection, session_id: int, cache: DesignCache) -> dict:
     ``{"done": true}`` when every trial is answered or the session was finished.
 
     Raises:
-        StudyError: 404 when there is no such session.
+        StudyNotFound: there is no such session.
     """
     row = _session_row(conn, session_id)
     n = None if row["state"] == "finished" else _first_unanswered(conn, session_id)
@@ -391,17 +419,17 @@ def _stored_answer(conn: Connection, session_id: int, n: int) -> dict:
 def _check_answers(design: Design, plan: PlannedTrial, given: dict) -> list[tuple[str, str, Any]]:
     """Validate a trial's answers against its questions: (question, stored text, correct)."""
     if not isinstance(given, dict):
-        raise StudyError(422, "answers: must be an object of question id -> answer")
+        raise StudyInvalid("answers: must be an object of question id -> answer")
     unknown = [question for question in given if question not in plan.questions]
     if unknown:
-        raise StudyError(422, f"{unknown[0]}: not a question of trial {plan.n} (its questions: "
-                              f"{', '.join(plan.questions) or 'none'})")
+        raise StudyInvalid(f"{unknown[0]}: not a question of trial {plan.n} (its questions: "
+                           f"{', '.join(plan.questions) or 'none'})")
     rows = []
     for question_id in plan.questions:
         question = design.question(question_id)
         if question_id not in given or given[question_id] is None:
             if question.required:
-                raise StudyError(422, f"{question_id}: an answer is required")
+                raise StudyInvalid(f"{question_id}: an answer is required")
             # Every question asked gets its row: an optional one left unanswered is "", so the
             # export keeps the trial (its time, its rt) even when nothing else was answered.
             rows.append((question_id, "", None))
@@ -409,9 +437,9 @@ def _check_answers(design: Design, plan: PlannedTrial, given: dict) -> list[tupl
         try:
             stored = question.validate_answer(given[question_id])
         except ValueError as error:
-            raise StudyError(422, f"{question_id}: {error}") from None
+            raise StudyInvalid(f"{question_id}: {error}") from None
         if not storable(stored):
-            raise StudyError(422, f"{question_id}: text with a NUL or an unpaired surrogate")
+            raise StudyInvalid(f"{question_id}: text with a NUL or an unpaired surrogate")
         rows.append((question_id, stored, question.is_correct(stored, plan)))
     return rows
 
@@ -427,32 +455,33 @@ def answer_trial(conn: Connection, session_id: int, n: int, given: dict, rt_ms: 
         ``{"correct": bool, "answer": the right answer}``.
 
     Raises:
-        StudyError: 404 no such session or trial; 409 the trial was answered already (``extra``
-            holds the stored answer), is not the next one (``extra["next"]``), or the session is
-            finished; 422 an invalid answer (the detail names the question) or response time.
+        StudyNotFound: no such session or trial.
+        StudyConflict: the trial was answered already (``extra`` holds the stored answer), is
+            not the next one (``extra["next"]``), or the session is finished.
+        StudyInvalid: an invalid answer (the detail names the question) or response time.
     """
     row = _session_row(conn, session_id)
     plan_json = conn.execute(select(trials.c.plan, trials.c.answered_at).where(
         trials.c.session_id == session_id, trials.c.n == n)).first()
     if plan_json is None:
-        raise StudyError(404, f"session {session_id} has no trial {n}")
+        raise StudyNotFound(f"session {session_id} has no trial {n}")
     if plan_json.answered_at is not None:
-        raise StudyError(409, f"trial {n} of session {session_id} is answered already",
-                         **_stored_answer(conn, session_id, n))
+        raise StudyConflict(f"trial {n} of session {session_id} is answered already",
+                            **_stored_answer(conn, session_id, n))
     if row["state"] == "finished":
-        raise StudyError(409, f"session {session_id} is finished")
+        raise StudyConflict(f"session {session_id} is finished")
     expected = _first_unanswered(conn, session_id)
     if expected != n:
         # Another server may have answered trial n since it was read above (PostgreSQL reads
         # each statement's own snapshot): say so, with the stored answer, as for a retry.
         if trial_answered(conn, session_id, n):
-            raise StudyError(409, f"trial {n} of session {session_id} is answered already",
-                             **_stored_answer(conn, session_id, n))
-        raise StudyError(409, f"trial {n} is not the next one of session {session_id} (next: "
-                              f"{expected})", next=expected)
+            raise StudyConflict(f"trial {n} of session {session_id} is answered already",
+                                **_stored_answer(conn, session_id, n))
+        raise StudyConflict(f"trial {n} is not the next one of session {session_id} (next: "
+                            f"{expected})", next=expected)
     if isinstance(rt_ms, bool) or not isinstance(rt_ms, int | float) or not math.isfinite(rt_ms) \
             or not 0 <= rt_ms <= MAX_RT_MS:
-        raise StudyError(422, f"rt_ms: must be a number of milliseconds from 0 to {MAX_RT_MS:.0f}")
+        raise StudyInvalid(f"rt_ms: must be a number of milliseconds from 0 to {MAX_RT_MS:.0f}")
     design = cache.get(conn, row["study_id"])
     plan = _planned(plan_json.plan)
     rows = _check_answers(design, plan, given)
@@ -461,8 +490,8 @@ def answer_trial(conn: Connection, session_id: int, n: int, given: dict, rt_ms: 
         and_(trials.c.session_id == session_id, trials.c.n == n, trials.c.answered_at.is_(None)))
         .values(answered_at=answered_at, rt_ms=float(rt_ms))).rowcount
     if changed != 1:  # another server answered it between our check and our write
-        raise StudyError(409, f"trial {n} of session {session_id} is answered already",
-                         **_stored_answer(conn, session_id, n))
+        raise StudyConflict(f"trial {n} of session {session_id} is answered already",
+                            **_stored_answer(conn, session_id, n))
     if rows:
         conn.execute(insert(answers), [{"session_id": session_id, "n": n, "question": question,
                                         "answer": text, "correct": correct}
@@ -484,13 +513,15 @@ def set_state(conn: Connection, session_id: int, state: str, cache: DesignCache)
     A finished session stays finished: its unanswered trials are not offered again.
 
     Raises:
-        StudyError: 404 no such session; 422 an unknown state; 409 resuming a finished session.
+        StudyNotFound: no such session.
+        StudyInvalid: an unknown state.
+        StudyConflict: resuming a finished session.
     """
     if state not in SESSION_STATES:
-        raise StudyError(422, f"state: must be one of {', '.join(SESSION_STATES)}")
+        raise StudyInvalid(f"state: must be one of {', '.join(SESSION_STATES)}")
     row = _session_row(conn, session_id)
     if row["state"] == "finished" and state != "finished":
-        raise StudyError(409, f"session {session_id} is finished and cannot be resumed")
+        raise StudyConflict(f"session {session_id} is finished and cannot be resumed")
     if row["state"] != state:
         values = {"state": state}
         if state == "finished":
