@@ -176,7 +176,7 @@ def stroke_table(model_sets, seeds=(0, 1, 2)) -> list[dict]:
     """The conditioned profile along a stroke whose speed changes, against single frozen
     patterns built at each of the stroke's speeds; envelope distances, mean over ``seeds``."""
     from realpen.datasets.hatt import synthesize
-    from realpen.sound.stroke import Trajectory
+    from realpen.motion.trajectory import Trajectory
     from realpen.tactile.build import tactile_pattern
     from realpen.tactile.fidelity import loop_psd, signal_psd, through_actuator, weighted_lsd
     from realpen.tactile.grid import grid_from_hatt

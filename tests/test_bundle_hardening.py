@@ -34,7 +34,8 @@ from realpen.io.limits import MAX_JSON_BYTES, MAX_JSON_DEPTH, MAX_NUMBER_CHARS
 from realpen.live.catalog import Catalog, CatalogEntry
 from realpen.pens import BUNDLED_PENS
 from realpen.profile import resolve_profile, save_profile
-from realpen.profile.bundle import MAX_ZIP_BYTES, MAX_ZIP_ENTRIES, PenProfile, load_profile
+from realpen.profile.bundle import MAX_ZIP_BYTES, MAX_ZIP_ENTRIES, PenProfile
+from realpen.profile.registry import load_profile
 from realpen.profile.schema import MAX_WAV_BYTES, MAX_WAV_FRAMES
 
 GiB = 2**30

@@ -59,8 +59,8 @@ def build_template(root: Path) -> None:
     from test_hatt import synthetic_xml
 
     from realpen.examples import example_recording_path
+    from realpen.motion.coupling import Coupling
     from realpen.pens import bundled_dir
-    from realpen.sound.coupling import Coupling
 
     sf.write(root / "rec.wav", friction(3.0), 44100, subtype="PCM_16")
     shutil.copy(example_recording_path(), root / "rec.npz")

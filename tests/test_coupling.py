@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from realpen.errors import ParameterError, RealPenError
-from realpen.sound.coupling import Coupling, fit_coupling, load_measurements, one_pole
+from realpen.motion.coupling import Coupling, fit_coupling, load_measurements, one_pole
 
 TRUTH = dict(c_p=0.8, c_op=0.15, c_x=0.015, c_ov=10.0)
 

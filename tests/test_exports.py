@@ -660,7 +660,7 @@ class SimpleLoop:
 
 
 def test_a_pattern_with_a_sound_loop_and_coupling(tmp_path, notebook_pattern, pens):
-    from realpen.sound.coupling import Coupling
+    from realpen.motion.coupling import Coupling
 
     t = np.arange(14400) / 48000
     loop = SimpleLoop(0.1 * np.sin(2 * np.pi * 1000 * t), 48000)

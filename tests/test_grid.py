@@ -14,11 +14,13 @@ from conftest import assert_clean_failure, run_cli
 from scipy import signal
 
 from realpen.errors import ParameterError, RealPenError
+from realpen.motion.control import control_signals
+from realpen.motion.coupling import Coupling
+from realpen.motion.trajectory import Trajectory
 from realpen.pens import BUNDLED_PENS, bundled_dir
 from realpen.profile.build import profile_from_parts
-from realpen.profile.bundle import load_profile, save_profile
-from realpen.sound.coupling import Coupling
-from realpen.sound.stroke import Trajectory, control_signals
+from realpen.profile.bundle import save_profile
+from realpen.profile.registry import load_profile
 from realpen.tactile.actuator import parse_actuator
 from realpen.tactile.grid import GridPoint, VibrationGrid
 from realpen.tactile.pattern import Component, TactilePattern

@@ -27,8 +27,8 @@ import soundfile as sf
 from conftest import assert_clean_failure, run_cli
 from test_hatt import synthetic_xml
 
+from realpen.checks import MAX_RATE_HZ, MAX_UNITS, MIN_RATE_HZ
 from realpen.datasets.hatt import load_hatt, synthesize
-from realpen.dsp.limits import MAX_UNITS
 from realpen.errors import ParameterError, RealPenError
 from realpen.examples import example_recording_path
 from realpen.io import csvtable
@@ -44,12 +44,10 @@ from realpen.io.limits import (
     MAX_MODEL_ORDER,
     MAX_NPZ_ARRAY_BYTES,
     MAX_NPZ_DIRECTORY_BYTES,
-    MAX_RATE_HZ,
     MAX_XML_BYTES,
-    MIN_RATE_HZ,
 )
 from realpen.io.recording import as_recording, load_recording
-from realpen.sound.coupling import Coupling
+from realpen.motion.coupling import Coupling
 
 RATE = 1344
 SMALL_PEAK = 32 * 1024 * 1024  # bytes: what refusing a file may allocate, however large it claims

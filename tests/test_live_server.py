@@ -36,8 +36,8 @@ from realpen.live.app import LiveSettings, create_app  # noqa: E402
 from realpen.live.catalog import MIN_WAV_RATE, playable_rate, playable_wav  # noqa: E402
 from realpen.live.messages import MAX_MESSAGE_BYTES, MessageError, parse_message  # noqa: E402
 from realpen.live.store import CSV_COLUMNS, StrokeStore, export_csv  # noqa: E402
+from realpen.motion.trajectory import load_trajectory  # noqa: E402
 from realpen.profile import load_profile, resolve_profile, save_profile  # noqa: E402
-from realpen.sound.stroke import load_trajectory  # noqa: E402
 
 
 def device_log(client) -> list[dict]:
@@ -276,7 +276,7 @@ def test_parse_message_limits():
 def test_one_stroke_sample_definition_for_messages_store_and_rendering(store_target, tmp_path):
     from realpen.io.strokes import SAMPLE_FIELDS, StrokeSample
     from realpen.live import messages, store
-    from realpen.sound.stroke import Trajectory
+    from realpen.motion.trajectory import Trajectory
 
     assert messages.Sample is StrokeSample
     assert store.SAMPLE_FIELDS == SAMPLE_FIELDS == tuple(StrokeSample.model_fields)

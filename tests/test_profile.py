@@ -19,9 +19,9 @@ from realpen.pens import BUNDLE_ACTUATOR, BUNDLED_PENS, bundled_dir
 from realpen.pens.build import build_modelled_pen, write_model_recordings
 from realpen.profile import schema
 from realpen.profile.build import build_profile, profile_from_parts
-from realpen.profile.bundle import PenProfile, load_profile, save_profile
+from realpen.profile.bundle import PenProfile, save_profile
 from realpen.profile.compare import spectral_distance_db
-from realpen.profile.registry import resolve_profile
+from realpen.profile.registry import load_profile, resolve_profile
 from realpen.tactile.actuator import Actuator, parse_actuator
 from realpen.tactile.pattern import TactilePattern, json_fields
 
@@ -150,6 +150,30 @@ def test_broken_bundles_are_refused_in_one_line(built, tmp_path, case):
             handle.write(file, file.name)
     with pytest.raises(RealPenError, match=expected.split(";")[0].replace("(", r"\(")):
         load_profile(archive)
+
+
+@pytest.mark.parametrize("reference", ["nothere.ZIP", "nothere.zip", "nothere", "a/nothere",
+                                       "", " "])
+def test_one_resolver_words_one_mistake_one_way(reference, monkeypatch, tmp_path):
+    """load_profile, resolve_profile and the command line resolve a profile in one place, so a
+    missing profile reads the same whichever way it was asked for."""
+    import realpen
+
+    monkeypatch.chdir(tmp_path)
+    messages = set()
+    for load in (realpen.load_profile, load_profile, resolve_profile):
+        with pytest.raises(RealPenError) as caught:
+            load(reference)
+        messages.add(str(caught.value))
+    assert len(messages) == 1, messages
+    if reference == "nothere.ZIP":
+        assert messages == {"nothere.ZIP: no such profile (folder or .zip)"}
+
+
+def test_the_registry_finds_the_bundled_pens_where_the_pens_package_keeps_them():
+    from realpen.profile.registry import bundled_profiles_dir
+
+    assert bundled_profiles_dir() == bundled_dir()
 
 
 def test_not_a_bundle(tmp_path):

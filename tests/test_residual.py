@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from realpen.checks import MAX_BANDS
 from realpen.dsp.filters import prepare
 from realpen.errors import ParameterError
 from realpen.exports import render
@@ -18,13 +19,7 @@ from realpen.sound.loop import seam_report
 from realpen.tactile.build import build_pattern
 from realpen.tactile.conditions import MODELS, TactileParams
 from realpen.tactile.pattern import Component, TactilePattern
-from realpen.tactile.residual import (
-    MAX_BANDS,
-    Residual,
-    render_residual,
-    residual_bands,
-    residual_envelope,
-)
+from realpen.tactile.residual import Residual, render_residual, residual_bands, residual_envelope
 
 RATE_IN = 1344  # Hz, the method's accelerometer
 EDGES = residual_bands(30.0, 672.0, 10.0)

@@ -19,7 +19,9 @@ from realpen.errors import ParameterError, RealPenError
 from realpen.io.files import read_smpl_loop
 from realpen.io.recording import Recording
 from realpen.io.strokes import SAMPLE_FIELDS, StrokeSample
-from realpen.sound.coupling import Coupling
+from realpen.motion.control import control_signals
+from realpen.motion.coupling import Coupling
+from realpen.motion.trajectory import Trajectory, load_trajectory
 from realpen.sound.granular import granular, granular_loop, steady_part
 from realpen.sound.loop import (
     SoundLoop,
@@ -32,7 +34,7 @@ from realpen.sound.loop import (
     scan_windows,
     seam_report,
 )
-from realpen.sound.stroke import Trajectory, control_signals, load_trajectory, render_stroke
+from realpen.sound.stroke import render_stroke
 
 RATE = 48000
 UNIT = 14400   # 300 ms
@@ -666,8 +668,9 @@ UNIT_OF = {"rate": "Hz", "speed": "mm/s", "level_dbfs": "dBFS", "rms_dbfs": "dBF
 
 def public_callables():
     from realpen.io import csvtable
-    from realpen.sound import coupling, granular, loop, stroke
-    for module in (loop, granular, stroke, coupling, csvtable):
+    from realpen.motion import control, coupling, trajectory
+    from realpen.sound import granular, loop, stroke, unit
+    for module in (unit, loop, granular, stroke, trajectory, control, coupling, csvtable):
         for name, item in vars(module).items():
             if name.startswith("_") or getattr(item, "__module__", None) != module.__name__:
                 continue
@@ -912,7 +915,7 @@ def test_a_render_longer_than_the_limit_is_refused_before_it_is_made(monkeypatch
 
 
 def test_smoothing_time_constant_is_bounded():
-    from realpen.sound.coupling import MAX_SMOOTHING_MS
+    from realpen.motion.coupling import MAX_SMOOTHING_MS
 
     assert Coupling(smoothing_ms=MAX_SMOOTHING_MS).smoothing_ms == MAX_SMOOTHING_MS
     with pytest.raises(RealPenError, match="c.json: smoothing_ms: "):

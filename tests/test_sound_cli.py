@@ -17,7 +17,7 @@ import soundfile as sf
 from conftest import LMT_DIR, assert_clean_failure, run_cli
 from scipy import signal
 
-from realpen.sound.coupling import Coupling
+from realpen.motion.coupling import Coupling
 from realpen.sound.loop import level_db, load_sound, seam_report
 
 RATE = 48000

@@ -54,15 +54,15 @@ _HOMES: dict[str, str] = {
     "parse_actuator": "tactile.actuator",
     "find_loop": "sound.loop",
     "SoundLoop": "sound.loop",
-    "Coupling": "sound.coupling",
-    "load_profile": "profile.bundle",
+    "Coupling": "motion.coupling",
+    "load_profile": "profile.registry",
     "save_profile": "profile.bundle",
     "list_profiles": "profile.registry",
     "RealPenError": "errors",
     "ParameterError": "errors",
 }
-_SUBPACKAGES = ("display", "io", "dsp", "tactile", "sound", "profile", "exports", "datasets",
-                "examples", "errors", "pens", "live", "cli")
+_SUBPACKAGES = ("display", "io", "dsp", "motion", "tactile", "sound", "profile", "exports",
+                "datasets", "examples", "errors", "checks", "defaults", "pens", "live", "cli")
 
 __getattr__, __dir__ = lazy_attributes(__name__, _HOMES, __all__, _SUBPACKAGES)
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import typer
 
+from realpen.checks import require_number
 from realpen.cli.common import (
     check_outputs,
     command_group,
@@ -27,7 +28,8 @@ from realpen.cli.common import (
     terminate_as_interrupt,
     whole_number,
 )
-from realpen.errors import ParameterError, RealPenError, fail, require_number
+from realpen.defaults import DEVICE_TIMEOUT_S
+from realpen.errors import ParameterError, RealPenError, fail
 
 __all__ = ["device_app", "register"]
 
@@ -42,7 +44,7 @@ MAX_PINGS = 100_000
 MAX_SECONDS = 7 * 24 * 3600.0  # a week: longer is a mistake, not a measurement
 PING_EVERY_S = 1.0  # monitor: one PING a second shows the link is alive and how fast it is
 SCAN_S = 3.0
-DEFAULT_TIMEOUT_S = 2.0  # as realpen.device.client.DEFAULT_TIMEOUT_S (not imported: --help stays fast)
+DEFAULT_TIMEOUT_S = DEVICE_TIMEOUT_S  # realpen.device.client's, from the numpy-free defaults
 MAX_TIMEOUT_S = 3600.0
 
 

@@ -82,9 +82,9 @@ def build(
     from realpen.datasets.hatt import load_hatt
     from realpen.io.paths import user_profiles_dir
     from realpen.io.recording import load_recording
+    from realpen.motion.coupling import Coupling
     from realpen.profile import build_profile, save_profile
     from realpen.profile.build import check_name, read_grid_csv
-    from realpen.sound.coupling import Coupling
     from realpen.sound.loop import load_sound
     from realpen.tactile.actuator import parse_actuator
     from realpen.tactile.conditions import TactileParams

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import typer
 
+from realpen.checks import require_choice
 from realpen.cli.common import check_outputs, command_group, console, force_option
-from realpen.errors import ParameterError, RealPenError, require_choice
+from realpen.errors import ParameterError, RealPenError
 from realpen.io.paths import default_store
 
 __all__ = ["strokes_app", "serve", "register"]

@@ -23,19 +23,17 @@ from realpen.errors import RealPenError
 sound_app = command_group("Friction sound: seamless loop units, the pressure/speed coupling "
                           "(Eq. 1), and what a stroke sounds like.")
 
-# Defaults and limits of realpen.sound.loop and realpen.sound.granular (UNIT_MS, CROSSFADE_MS,
-# DEFAULT_RATE, MIN_RATE, MAX_RATE, REFERENCE_DBFS, GRAIN_MS, LENGTH_MS, MAX_LENGTH_MS), written
-# out so that help needs no numpy; a test checks that they agree with the library's.
-UNIT_MS = 300.0
-CROSSFADE_MS = 10.0
-DEFAULT_RATE = 48000
-MIN_RATE = 8000.0
-MAX_RATE = 384000.0
-REFERENCE_DBFS = -20.0
-GRAIN_MS = 50.0
-LENGTH_MS = 3000.0
-MAX_LENGTH_MS = 60000.0
-MODES = ("loop", "granular")
+# The library's own defaults and limits, from its numpy-free modules: help stays fast.
+from realpen.checks import MAX_MS as MAX_LENGTH_MS  # noqa: E402
+from realpen.checks import MAX_RATE_HZ as MAX_RATE  # noqa: E402
+from realpen.checks import MIN_SOUND_RATE_HZ as MIN_RATE  # noqa: E402
+from realpen.defaults import GRAIN_MS  # noqa: E402
+from realpen.defaults import SOUND_CROSSFADE_MS as CROSSFADE_MS  # noqa: E402
+from realpen.defaults import SOUND_MODES as MODES  # noqa: E402
+from realpen.defaults import SOUND_RATE_HZ as DEFAULT_RATE  # noqa: E402
+from realpen.defaults import SOUND_REFERENCE_DBFS as REFERENCE_DBFS  # noqa: E402
+from realpen.defaults import SOUND_UNIT_MS as UNIT_MS  # noqa: E402
+from realpen.defaults import TEXTURE_LENGTH_MS as LENGTH_MS  # noqa: E402
 
 MODE_HELP = "loop (one seamless unit) | granular (overlapping grains, no repetition)."
 RATE_HELP = (f"Resample the sound to this rate in Hz ({MIN_RATE:g} to {MAX_RATE:g}; lower rates "
@@ -80,7 +78,7 @@ def loop(
 
     Refuses a recording shorter than unit + crossfade; WAV and JSON are written both or neither.
     """
-    from realpen.errors import require_choice
+    from realpen.checks import require_choice
     from realpen.io.files import write_files
     from realpen.sound.granular import granular_loop
     from realpen.sound.loop import find_loop, load_sound
@@ -146,9 +144,10 @@ def render(
 
     from realpen.errors import fail
     from realpen.io.files import wav_bytes, write_files
-    from realpen.sound.coupling import Coupling
+    from realpen.motion.coupling import Coupling
+    from realpen.motion.trajectory import load_trajectory
     from realpen.sound.loop import load_sound
-    from realpen.sound.stroke import load_trajectory, render_stroke
+    from realpen.sound.stroke import render_stroke
 
     if mode != "loop" and find_unit is not None:
         raise RealPenError("--find-unit/--as-loop: only for --mode loop")
@@ -192,7 +191,7 @@ def fit(
     The coupling JSON and the report are written together or not at all.
     """
     from realpen.io.files import write_files
-    from realpen.sound.coupling import Coupling, fit_coupling, load_measurements
+    from realpen.motion.coupling import Coupling, fit_coupling, load_measurements
 
     check_outputs(output, json_out, force=force,
                   inputs={"measurements": measurements, "base coupling": base_path})

@@ -23,15 +23,13 @@ from realpen.cli.common import (
 )
 
 AXIS_HELP = "How axes become one: dft321 (default for several axes), magnitude, or x|y|z."
-# The study-1 conditions as realpen.tactile.conditions.CONDITIONS defines them (principal
-# frequencies × sub-patterns × unit length); written out so that help needs no numpy. A test
-# checks that the two agree.
-CONDITION_HELP = ("Study-1 preset: A=5×15×100ms, B=10×15×100ms, C=15×15×100ms, D=5×1×1500ms, "
-                  "E=10×1×1500ms, F=15×1×1500ms (default B).")
-# realpen.tactile.conditions.MODELS and RECOMMENDED_MODEL, written out for fast help (a test
-# checks they agree).
-MODELS = ("sines", "sines+residual")
-RECOMMENDED_MODEL = "sines+residual"
+# The study-1 conditions (principal frequencies × sub-patterns × unit length) and the model,
+# from the numpy-free defaults: help stays fast.
+from realpen.defaults import CONDITIONS, RECOMMENDED_MODEL  # noqa: E402
+
+CONDITION_HELP = "Study-1 preset: " + ", ".join(
+    f"{key}={top}×{subpatterns}×{unit_ms:g}ms"
+    for key, (top, subpatterns, unit_ms) in CONDITIONS.items()) + " (default B)."
 MODEL_HELP = ("sines+residual (the default: the method's principal frequencies plus the noise "
               "floor between them, as shaped noise; a felt spectrum 2.3× closer to real paper "
               "in bench_fidelity) | sines (the method exactly; the default with --condition, "
@@ -229,8 +227,8 @@ def render(
 
     from realpen.errors import fail
     from realpen.io.files import wav_bytes, write_files
+    from realpen.motion.trajectory import load_trajectory
     from realpen.profile import resolve_profile
-    from realpen.sound.stroke import load_trajectory
     from realpen.tactile.stroke import render_tactile_stroke
 
     given = Path(profile_ref) if profile_ref.strip() else None  # Path("") is the current folder

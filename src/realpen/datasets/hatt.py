@@ -28,17 +28,10 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from realpen.errors import ParameterError, fail, require_number
+from realpen.checks import MAX_RATE_HZ, MIN_RATE_HZ, require_number
+from realpen.errors import ParameterError, fail
 from realpen.io.files import check_readable_file, sha256_of
-from realpen.io.limits import (
-    MAX_FRAMES,
-    MAX_MODEL_ORDER,
-    MAX_NUMBER_CHARS,
-    MAX_RATE_HZ,
-    MAX_XML_BYTES,
-    MIN_RATE_HZ,
-    check_size,
-)
+from realpen.io.limits import MAX_FRAMES, MAX_MODEL_ORDER, MAX_NUMBER_CHARS, MAX_XML_BYTES, check_size
 from realpen.io.recording import Recording
 
 __all__ = ["ArmaModel", "HattModelSet", "load_hatt", "synthesize", "lsf_to_poly", "MAX_DURATION_S"]

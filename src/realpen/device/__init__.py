@@ -11,9 +11,11 @@
 - :mod:`~realpen.device.sim` — :class:`~realpen.device.sim.SimPen`: the real firmware under the
   MicroPython Unix port on a pseudo-terminal.
 
-May import: numpy and :mod:`realpen.errors`, :mod:`realpen.exports` (resampling a loop) and
-:mod:`realpen.profile`; pyserial and bleak only inside the functions that open a link. This
-``__init__`` imports nothing, so the protocol module loads alone.
+May import (the ``layers`` contract of ``[tool.importlinter]`` in ``pyproject.toml``, checked by
+``lint-imports``): :mod:`realpen.profile`, :mod:`realpen.exports` (resampling a loop),
+:mod:`realpen.display` and every layer below them; never :mod:`realpen.pens`, its sibling.
+pyserial and bleak only inside the functions that open a link. This ``__init__`` imports
+nothing, so the protocol module loads alone.
 """
 
 from __future__ import annotations

@@ -36,15 +36,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from realpen.checks import require_number
+from realpen.defaults import DEVICE_TIMEOUT_S
 from realpen.device import protocol as p
 from realpen.device.pattern import check_fits, pattern_bytes
 from realpen.device.transport import UPLOAD_WINDOW, DeviceDisconnected, DeviceError, Transport
-from realpen.errors import ParameterError, require_number
+from realpen.errors import ParameterError
 
 __all__ = ["PenClient", "PenInfo", "PenEvent", "state_payload", "DEFAULT_TIMEOUT_S", "SYNC_EVERY_CHUNKS",
            "FEATURE_NAMES", "EVENT_NAMES"]
 
-DEFAULT_TIMEOUT_S = 2.0  # a reply takes milliseconds over USB, tens of ms over Bluetooth
+DEFAULT_TIMEOUT_S = DEVICE_TIMEOUT_S  # a reply takes ms over USB, tens of ms over Bluetooth
 # An upload waits for the pen (a PING) after this many chunks (≈ 2.9 KB), unless its transport
 # lets fewer run ahead (Transport.upload_window: 4 over Bluetooth).
 SYNC_EVERY_CHUNKS = UPLOAD_WINDOW

@@ -7,8 +7,9 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 
+from realpen.checks import require_number
 from realpen.display.axes import axes_list, check_views, hz_ticks
-from realpen.errors import ParameterError, require_number
+from realpen.errors import ParameterError
 
 __all__ = ["plot_actuator", "VIEWS"]
 

@@ -7,8 +7,8 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 
+from realpen.checks import require_number
 from realpen.display.axes import axes_list, check_views, cyclic_spectrogram, db, side_colorbar
-from realpen.errors import require_number
 
 __all__ = ["plot_sound_loop", "VIEWS"]
 

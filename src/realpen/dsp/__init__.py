@@ -6,5 +6,8 @@ choice of units), :mod:`~realpen.dsp.stream` (the same analysis streamed block b
 unit's DFT321 from its axes' unit spectra), :mod:`~realpen.dsp.tracks` (frequency tracks
 across sub-patterns).
 
-May import: :mod:`realpen.errors`, :mod:`realpen.io`. Never a higher layer.
+May import (the ``layers`` contract of ``[tool.importlinter]`` in ``pyproject.toml``, checked by
+``lint-imports``): :mod:`realpen.io`, :mod:`realpen.checks` and the stdlib-only modules
+(:mod:`realpen.errors`, :mod:`realpen.validation`, :mod:`realpen.defaults`,
+``realpen._version``, ``realpen._lazy``, :mod:`realpen.examples`). Never a higher layer.
 """

@@ -12,8 +12,9 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
 
-from realpen.errors import ParameterError, fail, require_choice, require_number
-from realpen.io.limits import MAX_FRAMES, MAX_RATE_HZ, MIN_RATE_HZ
+from realpen.checks import MAX_RATE_HZ, MIN_RATE_HZ, require_choice, require_number
+from realpen.errors import ParameterError, fail
+from realpen.io.limits import MAX_FRAMES
 from realpen.io.recording import AXIS_CHOICES, Recording
 
 __all__ = ["dft321", "combine_axes", "resample", "highpass", "prepare", "SILENCE_DB"]
@@ -78,8 +79,8 @@ def resample(recording: Recording, rate: float, *, parameter: str = "rate") -> R
 
     Args:
         recording: any number of axes, at ``recording.rate`` Hz.
-        rate: the new rate in Hz, from :data:`~realpen.io.limits.MIN_RATE_HZ` to
-            :data:`~realpen.io.limits.MAX_RATE_HZ`.
+        rate: the new rate in Hz, from :data:`~realpen.checks.MIN_RATE_HZ` to
+            :data:`~realpen.checks.MAX_RATE_HZ`.
         parameter: the name the caller gave ``rate`` (e.g. ``"analysis_rate"``), for messages.
 
     Raises:

@@ -17,19 +17,22 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import maximum_filter1d
 
-from realpen.dsp.limits import (
+from realpen.checks import (
     MAX_SUBPATTERNS,
     MAX_TOP,
     MAX_UNIT_MS,
     MAX_UNIT_SAMPLES,
     MAX_UNITS,
     MIN_UNIT_SAMPLES,
+    require_choice,
+    require_number,
 )
-from realpen.errors import ParameterError, RealPenError, require_choice, require_number
+from realpen.errors import ParameterError, RealPenError
 
 __all__ = ["Analysis", "analyze", "principal_frequencies", "select_units", "fft_size",
-           "require_count", "unit_samples_for", "band_edges_for",
-           "ProgressCallback", "SELECTIONS", "FEATURE_BANDS", "PEAK_FLOOR_DB"]
+           "require_count", "unit_samples_for", "band_edges_for", "unit_band_levels_db",
+           "check_unit_count", "top_peaks", "ProgressCallback", "SELECTIONS", "FEATURE_BANDS",
+           "PEAK_FLOOR_DB"]
 
 ProgressCallback = Callable[[int, int], None]
 SELECTIONS = ("stationary", "middle")
@@ -129,8 +132,8 @@ def require_count(parameter: str, value: int, maximum: int) -> int:
 
 def unit_samples_for(unit_ms: float, rate: float, source: object = "signal") -> int:
     """Samples in one unit sequence of ``unit_ms`` ms at ``rate`` Hz (rounded), checked to lie
-    between :data:`~realpen.dsp.limits.MIN_UNIT_SAMPLES` and
-    :data:`~realpen.dsp.limits.MAX_UNIT_SAMPLES`.
+    between :data:`~realpen.checks.MIN_UNIT_SAMPLES` and
+    :data:`~realpen.checks.MAX_UNIT_SAMPLES`.
 
     Raises:
         ParameterError: (parameter ``unit_ms``) too few or too many samples; the message names
@@ -176,9 +179,9 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
 
     Raises:
         ParameterError: a bad ``rate``, ``unit_ms`` or ``top`` (more than
-            :data:`~realpen.dsp.limits.MAX_TOP`); units of fewer than 8 or more than
-            :data:`~realpen.dsp.limits.MAX_UNIT_SAMPLES` samples at this rate, or more than
-            :data:`~realpen.dsp.limits.MAX_UNITS` units (parameter ``unit_ms``, naming
+            :data:`~realpen.checks.MAX_TOP`); units of fewer than 8 or more than
+            :data:`~realpen.checks.MAX_UNIT_SAMPLES` samples at this rate, or more than
+            :data:`~realpen.checks.MAX_UNITS` units (parameter ``unit_ms``, naming
             ``source``).
     """
     from scipy import signal  # here: the streamed analysis imports this module without it
@@ -188,7 +191,7 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
     top = require_count("top", top, MAX_TOP)
     unit_samples = unit_samples_for(unit_ms, rate, source)
     count = len(x) // unit_samples
-    _check_units(count, unit_ms, source)
+    check_unit_count(count, unit_ms, source)
     nyquist = rate / 2
     fmax = nyquist if fmax is None else min(fmax, nyquist)
     nfft = fft_size(unit_samples)
@@ -212,12 +215,12 @@ def principal_frequencies(x: np.ndarray, rate: float, unit_ms: float = 100.0, to
         block = block - block.mean(axis=1, keepdims=True)
         spectrum = np.fft.rfft(block * window, n=nfft, axis=1)
         power = (spectrum.real ** 2 + spectrum.imag ** 2) * scale
-        peaks_f, peaks_p = _top_peaks(power, in_band, half_width, top, bin_hz)
+        peaks_f, peaks_p = top_peaks(power, in_band, half_width, top, bin_hz)
         # Sub-bin interpolation may step a hair past a band edge; the peak is still in band.
         peaks_f = np.clip(peaks_f, fmin, fmax)
         out_freqs[first:first + len(block)] = peaks_f
         out_powers[first:first + len(block)] = peaks_p
-        bands[first:first + len(block)] = _band_levels_db(power, in_band, band_edges)
+        bands[first:first + len(block)] = unit_band_levels_db(power, in_band, band_edges)
         if progress is not None:
             progress(min(first + chunk, count), count)
     return starts, out_freqs, out_powers, bands
@@ -229,7 +232,7 @@ def band_edges_for(freqs: np.ndarray, fmin: float, fmax: float) -> np.ndarray:
     return np.searchsorted(freqs, np.linspace(fmin, fmax, FEATURE_BANDS + 1)[:-1])
 
 
-def _band_levels_db(power: np.ndarray, in_band: np.ndarray, band_edges: np.ndarray
+def unit_band_levels_db(power: np.ndarray, in_band: np.ndarray, band_edges: np.ndarray
                     ) -> np.ndarray:
     """Band levels in dB of each row of ``power``: the sum of its bins from each band's first
     bin (``band_edges``) to the next band's (the last band: to the end of the row)."""
@@ -240,8 +243,8 @@ def _band_levels_db(power: np.ndarray, in_band: np.ndarray, band_edges: np.ndarr
     return 10 * np.log10(band_power[:, :FEATURE_BANDS] + _TINY)
 
 
-def _check_units(units: int, unit_ms: float, source: object) -> None:
-    """Refuse more than :data:`~realpen.dsp.limits.MAX_UNITS` units, before their arrays are
+def check_unit_count(units: int, unit_ms: float, source: object) -> None:
+    """Refuse more than :data:`~realpen.checks.MAX_UNITS` units, before their arrays are
     allocated."""
     if units > MAX_UNITS:
         raise ParameterError("unit_ms", f"{source} holds {units:,} units of {unit_ms:g} ms; an "
@@ -264,7 +267,7 @@ def _neighbourhood_max(power: np.ndarray, half_width: int) -> np.ndarray:
     return out
 
 
-def _top_peaks(power: np.ndarray, in_band: np.ndarray, half_width: int, top: int,
+def top_peaks(power: np.ndarray, in_band: np.ndarray, half_width: int, top: int,
                bin_hz: float, weight: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray]:
     """Strongest ``top`` peaks per row with parabolic (log-power) sub-bin interpolation.
@@ -342,7 +345,7 @@ def select_units(band_levels_db: np.ndarray, count: int, selection: str = "stati
 
     Raises:
         ParameterError: an unknown ``selection`` or a ``count`` below 1 or above
-            :data:`~realpen.dsp.limits.MAX_SUBPATTERNS`.
+            :data:`~realpen.checks.MAX_SUBPATTERNS`.
         RealPenError: fewer than ``count + 2`` units.
     """
     require_choice("selection", selection, SELECTIONS)
@@ -388,7 +391,7 @@ def analyze(x: np.ndarray, rate: float, unit_ms: float = 100.0, top: int = 10, c
     Raises:
         ParameterError: a bad ``rate``, ``unit_ms``, ``top``, ``count`` or ``selection``
             (worded with these names, e.g. ``"unit_ms: must be > 0, got -1"``), each checked
-            against its limit in :mod:`realpen.dsp.limits` before anything is allocated.
+            against its limit in :mod:`realpen.checks` before anything is allocated.
         RealPenError: a silent or constant signal (no peaks), or a signal too short for
             ``count + 2`` units.
 

@@ -17,7 +17,7 @@ the recording (only the per-unit results do) and the work is one short FFT per u
    frequency. Peaks are found in the unfiltered unit spectrum, ranked by their filtered power
    and weighted at their interpolated frequency; the band levels and the silence check use the
    weighted spectrum;
-4. the same peak picking (:func:`realpen.dsp.spectrum._top_peaks`), the same band levels and
+4. the same peak picking (:func:`realpen.dsp.spectrum.top_peaks`), the same band levels and
    the same choice of units as :func:`realpen.dsp.spectrum.principal_frequencies` and
    :func:`realpen.dsp.spectrum.select_units` (the stationary run found as the units stream
    past, with the same arithmetic).
@@ -44,20 +44,20 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from realpen.dsp.limits import MAX_SUBPATTERNS, MAX_TOP, MAX_UNIT_MS, MAX_UNITS
+from realpen.checks import MAX_SUBPATTERNS, MAX_TOP, MAX_UNIT_MS, MAX_UNITS, require_choice, require_number
 from realpen.dsp.spectrum import (
     FEATURE_BANDS,
     SELECTIONS,
     Analysis,
     ProgressCallback,
-    _band_levels_db,
-    _check_units,
-    _top_peaks,
     band_edges_for,
+    check_unit_count,
     require_count,
+    top_peaks,
+    unit_band_levels_db,
     unit_samples_for,
 )
-from realpen.errors import ParameterError, RealPenError, fail, require_choice, require_number
+from realpen.errors import ParameterError, RealPenError, fail
 from realpen.io.blocks import ArrayStream, RecordingStream
 from realpen.io.recording import AXIS_CHOICES
 
@@ -166,7 +166,7 @@ class _Plan:
         near the cutoff would move a 32 Hz tone's peak by 4 Hz. Band levels and mean squares
         are those of the weighted spectrum.
         """
-        freqs, powers = _top_peaks(power, self.in_band, self.half_width, self.top, self.bin_hz,
+        freqs, powers = top_peaks(power, self.in_band, self.half_width, self.top, self.bin_hz,
                                    weight=self.response)
         # Sub-bin interpolation may step a hair past a band edge; the peak is still in band.
         freqs = np.clip(freqs, self.fmin, self.fmax)
@@ -177,7 +177,7 @@ class _Plan:
         freqs = np.take_along_axis(freqs, order, axis=1)
         powers = np.take_along_axis(powers, order, axis=1)
         weighted = power * self.response
-        return (freqs, powers, _band_levels_db(weighted, self.in_band, self.band_edges),
+        return (freqs, powers, unit_band_levels_db(weighted, self.in_band, self.band_edges),
                 weighted @ self.mean_square)
 
 
@@ -200,7 +200,7 @@ class _Rows:
     def extend(self, rows: np.ndarray) -> None:
         need = self.size + len(rows)
         if need > len(self.data):
-            _check_units(need, self.unit_ms, self.source)
+            check_unit_count(need, self.unit_ms, self.source)
             grown = np.empty((max(need, min(2 * len(self.data), MAX_UNITS)),)
                              + self.data.shape[1:], dtype=self.data.dtype)
             grown[:self.size] = self.data[:self.size]
@@ -308,7 +308,7 @@ def analyze_stream(stream: RecordingStream, *, unit_ms: float = 100.0, top: int 
     Raises:
         ParameterError: a bad option (Python names: ``unit_ms``, ``top``, ``count``,
             ``selection``, ``axis``, ``highpass_hz``, ``fmin``, ``fmax``, ``dtype``), or more
-            than :data:`~realpen.dsp.limits.MAX_UNITS` units (``unit_ms``, naming the source).
+            than :data:`~realpen.checks.MAX_UNITS` units (``unit_ms``, naming the source).
         RealPenError: a damaged file or bad values (from the stream), no such axis, a silent
             or constant recording, one too short for ``count + 2`` units, or no peaks in the
             selected units.
@@ -350,7 +350,7 @@ def analyze_stream(stream: RecordingStream, *, unit_ms: float = 100.0, top: int 
                  combine)
     expected = stream.frames_hint // unit_samples
     if stream.frames is not None:
-        _check_units(expected, unit_ms, source)  # before the results are allocated
+        check_unit_count(expected, unit_ms, source)  # before the results are allocated
     freqs_out = _Rows(expected, top, dtype, unit_ms, source)
     powers_out = _Rows(expected, top, dtype, unit_ms, source)
     bands_out = _Rows(expected, FEATURE_BANDS, dtype, unit_ms, source)

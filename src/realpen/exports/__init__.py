@@ -19,8 +19,12 @@ Looping: the tactile pattern (1500 ms) loops while the pen moves. WAV, C header 
 ``createWaveform`` carry the loop; AHAP, ``.haptic``, ``.hjif`` and the Android envelopes have
 no loop flag, so they hold one period (or ``repeats`` periods) and loop at playback.
 
-May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.tactile`,
-:mod:`realpen.profile` (for :func:`export_profile`).
+May import (the ``layers`` contract of ``[tool.importlinter]`` in ``pyproject.toml``, checked by
+``lint-imports``): :mod:`realpen.sound`, :mod:`realpen.tactile`, :mod:`realpen.motion`,
+:mod:`realpen.datasets`, :mod:`realpen.dsp`, :mod:`realpen.io`, :mod:`realpen.checks` and the
+stdlib-only modules (:mod:`realpen.errors`, :mod:`realpen.validation`, :mod:`realpen.defaults`,
+``realpen._version``, ``realpen._lazy``, :mod:`realpen.examples`); never :mod:`realpen.profile`
+or :mod:`realpen.display`, its siblings (:func:`export_profile` takes a loaded profile).
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from types import ModuleType
 
+from realpen.defaults import EXPORT_FORMATS
 from realpen.errors import ParameterError, fail
 from realpen.exports import ahap, android, c_header, haptic, hjif, wav
 from realpen.exports.base import Export
@@ -39,14 +44,9 @@ from realpen.io.files import atomic_path
 __all__ = ["FORMATS", "Export", "Written", "format_names", "profile_inputs", "companion_paths",
            "render", "export", "export_profile"]
 
-FORMATS: dict[str, ModuleType] = {
-    "wav": wav,
-    "c-header": c_header,
-    "ahap": ahap,
-    "haptic": haptic,
-    "android": android,
-    "hjif": hjif,
-}
+_MODULES = (wav, c_header, ahap, haptic, android, hjif)
+FORMATS: dict[str, ModuleType] = dict(zip(EXPORT_FORMATS, _MODULES))
+"""Format name (:data:`realpen.defaults.EXPORT_FORMATS`, in that order) → its module."""
 
 
 def _ahap_path_options(path: Path) -> dict:
@@ -114,7 +114,7 @@ def render(fmt: str, pattern, sound=None, coupling=None, **options) -> Export:
             name, tool and version; ``sound``/``coupling`` given here take precedence).
         sound: the sound loop (``samples``, ``rate`` in Hz); ``wav`` with ``stereo=True`` and
             the ``ahap`` sound events need it.
-        coupling: the Eq. 1 constants (:class:`realpen.sound.coupling.Coupling`); the Android
+        coupling: the Eq. 1 constants (:class:`realpen.motion.coupling.Coupling`); the Android
             JSON copies them, the other formats cannot carry them.
         options: ``name``, ``tool``, ``version`` (labels; default ``"pattern"``, none, the
             pattern's version) and the format's own options, e.g. ``stereo=True``,

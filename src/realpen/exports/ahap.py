@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from realpen import __version__
+from realpen._version import __version__
 from realpen.errors import ParameterError, fail
 from realpen.exports import envelope as env
 from realpen.exports.base import (

@@ -35,7 +35,7 @@ import re
 
 import numpy as np
 
-from realpen import __version__
+from realpen._version import __version__
 from realpen.exports import envelope as env
 from realpen.exports.base import RESIDUAL_IN_ENVELOPE, Export, check_pattern, check_span, residual_limits
 from realpen.tactile.pattern import TactilePattern

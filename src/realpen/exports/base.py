@@ -7,9 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from realpen.checks import MAX_RATE_HZ, MIN_RATE_HZ
 from realpen.errors import ParameterError, fail
 from realpen.tactile.pattern import TactilePattern
-from realpen.tactile.synthesis import MAX_RATE, MIN_RATE
 
 __all__ = ["Export", "MAX_REPEATS", "MAX_EXPORT_S", "MAX_EXPORT_FRAMES", "check_repeats",
            "check_span", "check_frames", "check_pattern", "sound_samples", "resample_loop",
@@ -181,8 +181,8 @@ def resample_loop(x: np.ndarray, rate: int, new_rate: int, what: str = "pattern"
 
     Raises:
         ParameterError: (parameter ``rate``) ``new_rate`` is not a whole number of Hz from
-            :data:`~realpen.tactile.synthesis.MIN_RATE` to
-            :data:`~realpen.tactile.synthesis.MAX_RATE`, the period would exceed
+            :data:`~realpen.checks.MIN_RATE_HZ` to
+            :data:`~realpen.checks.MAX_RATE_HZ`, the period would exceed
             :data:`MAX_EXPORT_FRAMES` at it, or the period is not a whole number of samples at
             ``new_rate`` (the loop would drift by a fraction of a sample each time).
     """
@@ -190,9 +190,9 @@ def resample_loop(x: np.ndarray, rate: int, new_rate: int, what: str = "pattern"
 
     if isinstance(new_rate, bool) or not isinstance(new_rate, (int, float, np.integer)) \
             or not np.isfinite(new_rate) or int(new_rate) != new_rate \
-            or not MIN_RATE <= new_rate <= MAX_RATE:
-        raise ParameterError("rate", f"must be a whole number of Hz from {MIN_RATE:g} to "
-                                     f"{MAX_RATE:g}, got {new_rate}")
+            or not MIN_RATE_HZ <= new_rate <= MAX_RATE_HZ:
+        raise ParameterError("rate", f"must be a whole number of Hz from {MIN_RATE_HZ:g} to "
+                                     f"{MAX_RATE_HZ:g}, got {new_rate}")
     new_rate = int(new_rate)
     if new_rate == rate:
         return np.asarray(x)

@@ -20,7 +20,7 @@ import re
 
 import numpy as np
 
-from realpen import __version__
+from realpen._version import __version__
 from realpen.exports.base import Export, check_pattern, resample_loop, title
 from realpen.tactile.pattern import TactilePattern
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import json
 
-from realpen import __version__
+from realpen._version import __version__
 from realpen.exports import envelope as env
 from realpen.exports.base import RESIDUAL_IN_ENVELOPE, Export, check_pattern, check_span, residual_limits
 from realpen.tactile.pattern import TactilePattern

@@ -53,7 +53,7 @@ import json
 
 import numpy as np
 
-from realpen import __version__
+from realpen._version import __version__
 from realpen.errors import fail
 from realpen.exports.base import (
     RESIDUAL_NOT_CARRIED,

@@ -5,7 +5,10 @@ Lives here: :mod:`~realpen.io.recording` (the :class:`Recording` type and its lo
 :mod:`~realpen.io.csvtable` (the one CSV reader of numeric tables), :mod:`~realpen.io.files`
 (atomic, all-or-nothing outputs and WAV bytes), :mod:`~realpen.io.paths` (the user's folders).
 
-May import: :mod:`realpen.errors` only (and numpy, soundfile, scipy). The bottom layer; nothing
-here imports another RealPen package. This ``__init__`` imports nothing, so that light modules
-(the WebSocket schema) can use a part of ``io`` without loading scipy.
+May import (the ``layers`` contract of ``[tool.importlinter]`` in ``pyproject.toml``, checked by
+``lint-imports``): :mod:`realpen.checks` and the stdlib-only modules (:mod:`realpen.errors`,
+:mod:`realpen.validation`, :mod:`realpen.defaults`, ``realpen._version``, ``realpen._lazy``,
+:mod:`realpen.examples`) only (and numpy, soundfile, scipy). The lowest package: it imports no
+other RealPen package. This ``__init__`` imports nothing, so that light modules (the
+WebSocket schema) can use a part of ``io`` without loading scipy.
 """

@@ -49,34 +49,31 @@ import numpy as np
 import soundfile as sf
 from scipy.interpolate import CubicSpline
 
+from realpen.checks import MAX_RATE_HZ, MIN_RATE_HZ, count_text, require_rate
 from realpen.errors import ParameterError, fail
 from realpen.io import csvtable
 from realpen.io.files import check_readable_file
 from realpen.io.limits import (
     MAX_CSV_BYTES,
-    MAX_RATE_HZ,
     MAX_SAMPLE_MAGNITUDE,
     MAX_STREAM_SAMPLES,
-    MIN_RATE_HZ,
-    _count_text,
     check_signal,
     check_size,
-    require_rate,
 )
 from realpen.io.recording import (
-    _NPZ_ERRORS,
-    _NPZ_METADATA,
     GAP_FACTOR,
     JITTER_TOLERANCE,
+    NPZ_ERRORS,
+    NPZ_METADATA,
     TIME_PATTERN,
-    _axis_names,
-    _read_exactly,
-    _read_npz_array,
-    _wav_missing_bytes,
+    axis_names,
     check_npz_method,
     npz_metadata,
     open_npz,
+    read_exactly,
     read_npy_header,
+    read_npz_array,
+    wav_missing_bytes,
 )
 
 __all__ = ["RecordingStream", "ArrayStream", "open_stream", "MAX_STREAM_SAMPLES",
@@ -224,7 +221,7 @@ def _check_values(source: object, block: np.ndarray, first_frame: int) -> None:
 def _check_samples(source: object, frames: int, channels: int) -> None:
     """Refuse a declared length over :data:`MAX_STREAM_SAMPLES` before anything is read."""
     if frames * channels > MAX_STREAM_SAMPLES:
-        raise fail(source, f"holds {_count_text(frames)} frames × {channels} channel(s); "
+        raise fail(source, f"holds {count_text(frames)} frames × {channels} channel(s); "
                            f"streamed recordings are limited to {MAX_STREAM_SAMPLES:,} samples "
                            f"in all")
 
@@ -290,7 +287,7 @@ class ArrayStream(RecordingStream):
             raise ParameterError("samples", f"must have shape (frames,) or (frames, axes), "
                                             f"got {data.shape}")
         self.rate = float(rate)
-        self.axes = tuple(axes) if axes is not None else _axis_names(self.samples.shape[1])
+        self.axes = tuple(axes) if axes is not None else axis_names(self.samples.shape[1])
         if len(self.axes) != self.samples.shape[1]:
             raise ParameterError("axes", f"names {len(self.axes)} axes for "
                                          f"{self.samples.shape[1]} columns")
@@ -321,11 +318,11 @@ class _AudioStream(RecordingStream):
             raise self._unreadable(error) from None
         check_signal(path, rate, 0, channels)  # rate and channels; the length is ours
         _check_samples(path, frames, channels)
-        missing = _wav_missing_bytes(path)
+        missing = wav_missing_bytes(path)
         if missing:
             raise fail(path, f"truncated: the WAV data chunk is {missing} bytes shorter than its "
                              f"header says")
-        self.rate, self.axes, self.units = float(rate), _axis_names(channels), "full scale"
+        self.rate, self.axes, self.units = float(rate), axis_names(channels), "full scale"
         self.frames = self.frames_hint = frames
 
     def _unreadable(self, error: Exception):
@@ -366,9 +363,9 @@ class _NpzStream(RecordingStream):
             with open_npz(path) as (archive, members, key):
                 self.info, self.key = members[key], key
                 self._layout(archive)
-                contents = {name: _read_npz_array(path, archive, members[name], name)
-                            for name in _NPZ_METADATA if name in members}
-        except _NPZ_ERRORS as error:
+                contents = {name: read_npz_array(path, archive, members[name], name)
+                            for name in NPZ_METADATA if name in members}
+        except NPZ_ERRORS as error:
             raise fail(path, f"not a readable NPZ archive ({error})") from None
         frames, channels = self.shape
         # Frames are checked against the streaming limit (_layout), not the in-memory one.
@@ -408,7 +405,7 @@ class _NpzStream(RecordingStream):
             with open(path, "rb") as raw:
                 raw.seek(info.header_offset)
                 signature, name_length, extra_length = _LOCAL_HEADER.unpack(
-                    _read_exactly(raw, _LOCAL_HEADER.size, path, key))
+                    read_exactly(raw, _LOCAL_HEADER.size, path, key))
                 if signature != b"PK\x03\x04":
                     raise zipfile.BadZipFile(f"bad local header of '{info.filename}'")
             self.offset = (info.header_offset + _LOCAL_HEADER.size + name_length + extra_length
@@ -450,14 +447,14 @@ class _NpzStream(RecordingStream):
                         handle.seek(self.data_start + first)
                     for start in range(0, frames, block_frames):
                         stop = min(start + block_frames, frames)
-                        parts = [_read_exactly(handle, last - first, self.path, self.key)
+                        parts = [read_exactly(handle, last - first, self.path, self.key)
                                  for handle, (first, last) in
                                  zip(handles, self._column_spans(start, stop))]
                         yield self._assemble(parts, stop - start)
                 finally:
                     for handle in handles:
                         handle.close()
-        except _NPZ_ERRORS as error:
+        except NPZ_ERRORS as error:
             raise fail(self.path, f"not a readable NPZ archive ({error})") from None
 
     def _mapped_blocks(self, block_frames: int) -> Iterator[np.ndarray]:
@@ -499,15 +496,15 @@ class _NpzStream(RecordingStream):
                     parts = []
                     for first, last in spans:
                         raw.seek(self.offset + first)
-                        parts.append(_read_exactly(raw, last - first, self.path, self.key))
+                        parts.append(read_exactly(raw, last - first, self.path, self.key))
                 return self._assemble(parts, stop - start)
             with zipfile.ZipFile(self.path) as archive, archive.open(self.info) as handle:
                 parts = []
                 for first, last in spans:  # ascending: each seek moves forward
                     handle.seek(self.data_start + first)
-                    parts.append(_read_exactly(handle, last - first, self.path, self.key))
+                    parts.append(read_exactly(handle, last - first, self.path, self.key))
                 return self._assemble(parts, stop - start)
-        except _NPZ_ERRORS as error:
+        except NPZ_ERRORS as error:
             raise fail(self.path, f"not a readable NPZ archive ({error})") from None
 
 
@@ -520,7 +517,7 @@ class _CsvStream(RecordingStream):
         self.source, self.path = str(path), path
         check_size(path, MAX_CSV_BYTES, "CSV files")
         self.frames = None
-        self.frames_hint = max(1, csvtable._line_breaks(path))
+        self.frames_hint = max(1, csvtable.line_breaks(path))
         rows = self._rows()
         names = next(rows)
         self.time_index = next((i for i, name in enumerate(names) if TIME_PATTERN.match(name)),
@@ -573,7 +570,7 @@ class _CsvStream(RecordingStream):
     def _values(self, pending: list, names, delimiter: str) -> np.ndarray:
         values = np.empty((len(pending), len(names)))
         for index, name in enumerate(names):
-            values[:, index], _ = csvtable._numbers(
+            values[:, index], _ = csvtable.column_numbers(
                 self.path, [cells[index] for _, cells in pending], pending, name, delimiter, "")
         return values
 

@@ -41,7 +41,8 @@ from realpen.io.limits import (
     check_size,
 )
 
-__all__ = ["Table", "read_csv", "is_number", "DELIMITERS", "SNIFF_ROWS"]
+__all__ = ["Table", "read_csv", "is_number", "line_breaks", "column_numbers", "DELIMITERS",
+           "SNIFF_ROWS"]
 
 DELIMITERS = ",;\t "
 SNIFF_ROWS = 20
@@ -138,7 +139,7 @@ def read_csv(path: str | os.PathLike, columns: Sequence[str | int] | None = None
     path = Path(path)
     check_readable_file(path)
     check_size(path, MAX_CSV_BYTES, "CSV files")
-    capacity = _line_breaks(path) + 1  # at least the rows there are: arrays sized once
+    capacity = line_breaks(path) + 1  # at least the rows there are: arrays sized once
     try:
         with open(path, encoding="utf-8-sig") as handle:  # universal newlines, as an editor
             return _read_rows(path, handle, capacity, columns, header, min_rows,
@@ -210,7 +211,7 @@ def _read_rows(path: Path, handle, capacity: int, columns, header: bool | None, 
     def flush() -> None:
         nonlocal count, comma
         for position, index in enumerate(indices):
-            column, used_comma = _numbers(path, [cells[position] for _, cells in pending],
+            column, used_comma = column_numbers(path, [cells[position] for _, cells in pending],
                                           pending, shown[index], delimiter, hint)
             values[count:count + len(pending), position] = column
             comma = comma or used_comma
@@ -257,7 +258,7 @@ def is_number(text: str, decimal_comma: bool = False) -> bool:
     return True
 
 
-def _line_breaks(path: Path) -> int:
+def line_breaks(path: Path) -> int:
     """How many line breaks (``\\n``, ``\\r\\n`` or ``\\r``) the file has, or a few more.
 
     Counted on bytes, a block at a time, so that the arrays can be allocated once at their
@@ -356,7 +357,7 @@ def _indices(path: Path, columns, names: tuple[str, ...] | None, width: int, lin
     return indices
 
 
-def _numbers(path: Path, cells: list[str], data, name: str, delimiter: str,
+def column_numbers(path: Path, cells: list[str], data, name: str, delimiter: str,
              hint: str) -> tuple[np.ndarray, bool]:
     """One column's cells as finite floats; (values, whether a decimal comma was read)."""
     comma = False

@@ -8,6 +8,10 @@ NPZ bomb, a deeply nested JSON document — can make a call allocate more than a
 The JSON reader here (:func:`load_json`) is the one every RealPen JSON input goes through
 (profile.json, coupling files): it bounds the document's size, nesting depth and the number of
 digits of any number, and refuses ``NaN``/``Infinity``.
+
+The limits of *arguments* (rates, lengths, counts) and the helpers that check them are
+:mod:`realpen.checks`; :func:`check_signal` refuses a header's rate by the same
+:data:`~realpen.checks.MIN_RATE_HZ` and :data:`~realpen.checks.MAX_RATE_HZ`.
 """
 
 from __future__ import annotations
@@ -18,22 +22,16 @@ import os
 import re
 from pathlib import Path
 
-from realpen.errors import ParameterError, fail, require_number
+from realpen.checks import MAX_RATE_HZ, MIN_RATE_HZ, count_text, rate_text
+from realpen.errors import fail
 
-__all__ = ["MIN_RATE_HZ", "MAX_RATE_HZ", "MAX_CHANNELS", "MAX_FRAMES", "MAX_STREAM_SAMPLES",
+__all__ = ["MAX_CHANNELS", "MAX_FRAMES", "MAX_STREAM_SAMPLES",
            "MAX_JSON_BYTES",
            "MAX_JSON_DEPTH", "MAX_NUMBER_CHARS", "MAX_CSV_FIELD_CHARS", "MAX_CSV_LINE_CHARS",
            "MAX_CSV_BYTES", "MAX_NPZ_DIRECTORY_BYTES", "MAX_NPZ_ARRAY_BYTES",
            "MAX_SAMPLE_MAGNITUDE", "MAX_XML_BYTES", "MAX_MODEL_ORDER",
-           "load_json", "json_depth", "count_values", "read_bounded", "check_size", "check_signal",
-           "require_rate"]
+           "load_json", "json_depth", "count_values", "read_bounded", "check_size", "check_signal"]
 
-MIN_RATE_HZ = 100
-"""The lowest sampling rate (Hz) of a signal read or written: an accelerometer for a pen runs at
-1 kHz or more; a header that says 1 Hz is damaged."""
-MAX_RATE_HZ = 384_000
-"""The highest sampling rate (Hz) of a signal read, analysed or written: audio's highest common
-rate (the tactile, sound and export writers use this same number)."""
 MAX_CHANNELS = 32
 """The most channels a recording may have (a pen's accelerometer has 3, a microphone 1–2)."""
 MAX_FRAMES = 2**26
@@ -45,14 +43,14 @@ MAX_STREAM_SAMPLES = 2**30
 """The most samples (frames × axes) a streamed recording may hold: 1,073,741,824, i.e. 74 h of a
 three-axis 1.344 kHz accelerometer (a day is 348 M) or 6.2 h of 48 kHz mono. Streaming keeps
 one block in memory, so this bounds the time a forged header can cost, not memory; an analysis
-also refuses more than :data:`realpen.dsp.limits.MAX_UNITS` units."""
+also refuses more than :data:`realpen.checks.MAX_UNITS` units."""
 MAX_JSON_BYTES = 4 * 1024 * 1024
 """The largest JSON document read (bytes): a profile.json is a few kB."""
 MAX_JSON_DEPTH = 32
 """The deepest nesting of arrays and objects in a JSON document read."""
 MAX_JSON_VALUES = 2**19
 """The most values (objects, arrays, numbers, strings) in a JSON document read: 524,288, more
-than the largest pattern RealPen writes holds (:data:`realpen.dsp.limits.MAX_COMPONENTS`
+than the largest pattern RealPen writes holds (:data:`realpen.checks.MAX_COMPONENTS`
 components of 8 fields); a profile of the method's is about 1,500."""
 MAX_NUMBER_CHARS = 64
 """The longest number (characters) in a JSON document; 17 significant digits are all a float
@@ -225,16 +223,6 @@ def check_size(path: str | os.PathLike, limit: int, kind: str) -> int:
     return size
 
 
-def _rate_text(rate: float) -> str:
-    """A rate for a message, in Hz; an integer too large for a float is not converted."""
-    if isinstance(rate, numbers.Integral) and abs(rate) >= 10**15:
-        return "over 1e+15" if rate > 0 else "below -1e+15"
-    return f"{rate:,.10g}"
-
-
-def _count_text(count: int) -> str:
-    """A count from a header for a message: a forged one may have thousands of digits."""
-    return f"{count:,}" if count < 10**15 else "over 10^15"
 
 
 def check_signal(source: object, rate: float | None, frames: int, channels: int) -> None:
@@ -254,31 +242,11 @@ def check_signal(source: object, rate: float | None, frames: int, channels: int)
     # NaN and infinity fail the comparison; an integer compares exactly, however large.
     if rate is not None and not (isinstance(rate, numbers.Real)
                                  and MIN_RATE_HZ <= rate <= MAX_RATE_HZ):
-        raise fail(source, f"sampling rate {_rate_text(rate)} Hz is outside the "
+        raise fail(source, f"sampling rate {rate_text(rate)} Hz is outside the "
                            f"{MIN_RATE_HZ:,}–{MAX_RATE_HZ:,} Hz RealPen reads (a damaged header?)")
     if not 1 <= channels <= MAX_CHANNELS:
-        raise fail(source, f"has {_count_text(channels)} channels; recordings are limited to "
+        raise fail(source, f"has {count_text(channels)} channels; recordings are limited to "
                            f"1–{MAX_CHANNELS}")
     if frames * channels > MAX_FRAMES:
-        raise fail(source, f"holds {_count_text(frames)} frames × {channels} channel(s); "
+        raise fail(source, f"holds {count_text(frames)} frames × {channels} channel(s); "
                            f"recordings are limited to {MAX_FRAMES:,} samples in all")
-
-
-def require_rate(parameter: str, rate: float) -> None:
-    """Raise a :class:`~realpen.errors.ParameterError` unless ``rate`` (Hz) is a number between
-    :data:`MIN_RATE_HZ` and :data:`MAX_RATE_HZ`.
-
-    >>> require_rate("rate", 1)
-    Traceback (most recent call last):
-    ...
-    realpen.errors.ParameterError: rate: must be between 100 and 384,000 Hz, got 1
-    """
-    if isinstance(rate, numbers.Integral) and not isinstance(rate, bool) and abs(rate) > MAX_RATE_HZ:
-        # Before require_number, which converts to float: 10**400 would overflow.
-        raise ParameterError(parameter, f"must be between {MIN_RATE_HZ:,} and {MAX_RATE_HZ:,} Hz, "
-                                        f"got {_rate_text(rate)}")
-    # Not a positive number at all keeps require_number's wording ("must be > 0, got -5").
-    require_number(parameter, rate, minimum=0.0, inclusive=False)
-    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
-        raise ParameterError(parameter, f"must be between {MIN_RATE_HZ:,} and {MAX_RATE_HZ:,} Hz, "
-                                        f"got {_rate_text(rate)}")

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import soundfile as sf
 
+from realpen.checks import MAX_RATE_HZ, MIN_RATE_HZ, require_rate
 from realpen.errors import ParameterError, fail
 from realpen.io.csvtable import read_csv
 from realpen.io.files import atomic_path, check_readable_file, riff_chunks, sha256_of
@@ -34,14 +35,15 @@ from realpen.io.limits import (
     MAX_NPY_HEADER_BYTES,
     MAX_NPZ_ARRAY_BYTES,
     MAX_NPZ_DIRECTORY_BYTES,
-    MAX_RATE_HZ,
     MAX_SAMPLE_MAGNITUDE,
-    MIN_RATE_HZ,
     check_signal,
-    require_rate,
 )
 
-__all__ = ["Recording", "load_recording", "as_recording", "save_npz", "AXIS_CHOICES"]
+__all__ = ["Recording", "load_recording", "as_recording", "save_npz", "AXIS_CHOICES",
+           # the readers' parts that the block reader (realpen.io.blocks) shares
+           "GAP_FACTOR", "JITTER_TOLERANCE", "TIME_PATTERN", "NPZ_METADATA", "NPZ_ERRORS",
+           "axis_names", "wav_missing_bytes", "open_npz", "npz_metadata", "check_npz_method",
+           "read_npz_array", "read_exactly", "read_npy_header"]
 
 AXIS_CHOICES = ("dft321", "x", "y", "z", "magnitude")
 
@@ -131,7 +133,7 @@ def _value_problem(samples: np.ndarray) -> str | None:
     return None
 
 
-def _axis_names(count: int) -> tuple[str, ...]:
+def axis_names(count: int) -> tuple[str, ...]:
     """Default names of ``count`` columns: x, y, z for up to three, else ch0, ch1, ..."""
     return ("x", "y", "z")[:count] if count <= 3 else tuple(f"ch{i}" for i in range(count))
 
@@ -184,7 +186,7 @@ def as_recording(data, rate: float | None = None, *, rate_parameter: str = "rate
     problem = _value_problem(samples)
     if problem:
         raise ParameterError(data_parameter, problem)
-    return Recording(samples, float(rate), _axis_names(samples.shape[1]), source="array")
+    return Recording(samples, float(rate), axis_names(samples.shape[1]), source="array")
 
 
 def load_recording(path: str | os.PathLike, rate: float | None = None,
@@ -246,15 +248,15 @@ def _load_audio(path: Path) -> Recording:
         raise fail(path, f"not a readable audio file ({reason})") from None
     if data.shape[0] < expected:
         raise fail(path, f"truncated: header promises {expected} frames, file holds {data.shape[0]}")
-    missing = _wav_missing_bytes(path)
+    missing = wav_missing_bytes(path)
     if missing:
         raise fail(path, f"truncated: the WAV data chunk is {missing} bytes shorter than its header says")
     channels = data.shape[1]
-    axes = _axis_names(channels)
+    axes = axis_names(channels)
     return Recording(data, float(rate), axes, units="full scale")
 
 
-def _wav_missing_bytes(path: Path) -> int:
+def wav_missing_bytes(path: Path) -> int:
     """Bytes missing from a RIFF/WAVE data chunk (0 when complete or not a RIFF file).
 
     libsndfile quietly reads what is there, so a cut-off WAV must be caught from its header.
@@ -324,11 +326,11 @@ def _even_sampling(path: Path, name: str, times: np.ndarray, values: np.ndarray
 
 
 NPZ_SAMPLE_KEYS = ("samples", "data", "acc", "acceleration")  # the first one present is read
-_NPZ_METADATA = ("rate", "axes", "units")
+NPZ_METADATA = ("rate", "axes", "units")
 _READ_BYTES = 1 << 22  # bytes inflated at a time from an NPZ member
 # What a damaged archive or member can raise from zipfile (RuntimeError: encrypted), zlib and
 # numpy's header reader.
-_NPZ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+NPZ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
                RuntimeError, OverflowError)
 
 
@@ -341,10 +343,10 @@ def _load_npz(path: Path, rate: float | None) -> Recording:
     """
     try:
         with open_npz(path) as (archive, members, key):
-            samples = _read_npz_array(path, archive, members[key], key, samples=True)
-            contents = {name: _read_npz_array(path, archive, members[name], name)
-                        for name in _NPZ_METADATA if name in members}
-    except _NPZ_ERRORS as error:
+            samples = read_npz_array(path, archive, members[key], key, samples=True)
+            contents = {name: read_npz_array(path, archive, members[name], name)
+                        for name in NPZ_METADATA if name in members}
+    except NPZ_ERRORS as error:
         raise fail(path, f"not a readable NPZ archive ({error})") from None
     if samples.ndim == 1:
         samples = samples[:, None]
@@ -371,7 +373,7 @@ def npz_metadata(path: Path, contents: dict, rate: float | None, frames: int, ch
             raise fail(path, "'axes' must be an array of axis names")
         axes = tuple(str(a) for a in names)
     else:
-        axes = _axis_names(channels)
+        axes = axis_names(channels)
     if len(axes) != channels:
         raise fail(path, f"NPZ names {len(axes)} axes for {channels} columns")
     units = str(contents["units"]) if "units" in contents else "arbitrary"
@@ -436,19 +438,19 @@ def read_npy_header(handle, path: Path, key: str) -> tuple[tuple[int, ...], bool
     # numpy reads the whole declared header (up to 4 GiB) before checking its size: the
     # length is read and bounded here, and numpy parses a copy of the bounded bytes.
     width = 2 if version == (1, 0) else 4
-    length_bytes = _read_exactly(handle, width, path, key)
+    length_bytes = read_exactly(handle, width, path, key)
     length = int.from_bytes(length_bytes, "little")
     if length > MAX_NPY_HEADER_BYTES:
         raise fail(path, f"'{key}' declares a {length:,}-byte .npy header; headers are "
                          f"limited to {MAX_NPY_HEADER_BYTES:,} bytes")
-    header = io.BytesIO(length_bytes + _read_exactly(handle, length, path, key))
+    header = io.BytesIO(length_bytes + read_exactly(handle, length, path, key))
     read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
         np.lib.format.read_array_header_2_0
     return read_header(header)
 
 
-def _read_npz_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo, key: str,
-                    samples: bool = False) -> np.ndarray:
+def read_npz_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo, key: str,
+                   samples: bool = False) -> np.ndarray:
     """One member of an NPZ, checked from its .npy header before any of its data is read.
 
     The samples (``samples=True``) must be 1-D or 2-D real numbers within ``MAX_CHANNELS`` and
@@ -478,7 +480,7 @@ def _read_npz_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo,
             step = max(1, _READ_BYTES // max(dtype.itemsize, 1))
             for start in range(0, count, step):
                 stop = min(start + step, count)
-                data = _read_exactly(handle, (stop - start) * dtype.itemsize, path, key)
+                data = read_exactly(handle, (stop - start) * dtype.itemsize, path, key)
                 flat[start:stop] = np.frombuffer(data, dtype=dtype)
         else:
             size = count * dtype.itemsize
@@ -486,12 +488,12 @@ def _read_npz_array(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo,
                 raise fail(path, f"'{key}' declares more than {MAX_NPZ_ARRAY_BYTES:,} bytes; "
                                  f"NPZ arrays other than the samples are limited to "
                                  f"{MAX_NPZ_ARRAY_BYTES:,}")
-            flat = np.frombuffer(_read_exactly(handle, size, path, key), dtype=dtype,
+            flat = np.frombuffer(read_exactly(handle, size, path, key), dtype=dtype,
                                  count=count)
     return flat.reshape(shape[::-1]).T if fortran else flat.reshape(shape)
 
 
-def _read_exactly(handle, size: int, path: Path, key: str) -> bytes:
+def read_exactly(handle, size: int, path: Path, key: str) -> bytes:
     """``size`` bytes of an NPZ member; ``read(size)`` inflates no more than it returns."""
     data = handle.read(size)
     if len(data) < size:

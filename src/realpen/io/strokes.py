@@ -14,7 +14,7 @@ A stroke sample is what the pen reports at one instant while it writes:
 pressure, ``true`` is not a time), nothing else is accepted, NaN and infinity are refused. The
 live app's WebSocket schema (:class:`realpen.live.messages.Sample` *is* this class), the stroke
 store's columns (:data:`SAMPLE_FIELDS`, in this order) and the columnar
-:class:`realpen.sound.stroke.Trajectory` (its columns and value ranges) all come from here.
+:class:`realpen.motion.trajectory.Trajectory` (its columns and value ranges) all come from here.
 
 This module imports pydantic only, so the WebSocket schema can load without numpy's heavier
 neighbours (scipy, soundfile).

@@ -13,8 +13,8 @@ from realpen.errors import RealPenError, fail
 from realpen.exports.base import resample_loop
 from realpen.io.files import wav_bytes
 from realpen.pens import BUNDLED_PENS
-from realpen.profile.bundle import PenProfile, load_profile
-from realpen.profile.registry import list_profiles
+from realpen.profile.bundle import PenProfile
+from realpen.profile.registry import list_profiles, load_profile
 from realpen.profile.schema import MAX_WAV_FRAMES
 
 __all__ = ["MIN_WAV_RATE", "playable_rate", "playable_wav", "CatalogEntry", "Catalog"]
@@ -189,7 +189,7 @@ class Catalog:
     (``realpen serve`` prints the list once, on stdout, in its startup summary), so one bad
     bundle does not stop the app. Loading a bundle raises nothing but
     :class:`~realpen.errors.RealPenError` whatever its bytes, within bounded memory
-    (:func:`~realpen.profile.bundle.load_profile`).
+    (:func:`~realpen.profile.registry.load_profile`).
     """
 
     def __init__(self, extra: list[Path] | None = None):

@@ -5,10 +5,10 @@ The bundled profiles are *modelled*, not recorded: see :mod:`realpen.pens.model`
 the floats may differ in their last bits, so they regenerate equal within tolerances and with
 the same canonical version (see ``tests/test_profile.py``).
 
-May import: this ``__init__`` imports nothing of RealPen (the profile registry asks it where the
-bundled folder is); :mod:`~realpen.pens.model` imports :mod:`realpen.io`;
-:mod:`~realpen.pens.build` also :mod:`realpen.tactile`, :mod:`realpen.sound` and
-:mod:`realpen.profile`.
+May import (the ``layers`` contract of ``[tool.importlinter]`` in ``pyproject.toml``, checked by
+``lint-imports``): :mod:`realpen.profile`, :mod:`realpen.exports`, :mod:`realpen.display` and
+every layer below them; never :mod:`realpen.device`, its sibling. This ``__init__`` imports
+nothing of RealPen (the profile registry finds the bundled folder by this package's name).
 """
 
 from __future__ import annotations

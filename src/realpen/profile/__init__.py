@@ -6,9 +6,14 @@ folders and zips), :mod:`~realpen.profile.build` (recordings → profile),
 :mod:`~realpen.profile.registry` (the bundled and installed profiles),
 :mod:`~realpen.profile.compare` (distances between pens).
 
-May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.dsp`,
-:mod:`realpen.tactile`, :mod:`realpen.sound`, :mod:`realpen.pens` (bundled data only). This
-``__init__`` imports nothing until a name is used, so ``realpen.profile.schema`` stays light.
+May import (the ``layers`` contract of ``[tool.importlinter]`` in ``pyproject.toml``, checked by
+``lint-imports``): :mod:`realpen.sound`, :mod:`realpen.tactile`, :mod:`realpen.motion`,
+:mod:`realpen.datasets`, :mod:`realpen.dsp`, :mod:`realpen.io`, :mod:`realpen.checks` and the
+stdlib-only modules (:mod:`realpen.errors`, :mod:`realpen.validation`, :mod:`realpen.defaults`,
+``realpen._version``, ``realpen._lazy``, :mod:`realpen.examples`); never :mod:`realpen.exports`
+or :mod:`realpen.display`, its siblings, nor :mod:`realpen.pens` (the bundled pens are found as
+package data by the package's name). This ``__init__`` imports nothing until a name is used, so
+``realpen.profile.schema`` stays light.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from realpen._lazy import lazy_attributes
 __all__ = ["PenProfile", "load_profile", "save_profile", "build_profile", "list_profiles",
            "resolve_profile", "profile_locations", "ProfileMeta", "NAME_PATTERN"]
 
-_HOMES = {"PenProfile": "bundle", "load_profile": "bundle", "save_profile": "bundle",
+_HOMES = {"PenProfile": "bundle", "load_profile": "registry", "save_profile": "bundle",
           "build_profile": "build", "list_profiles": "registry", "resolve_profile": "registry",
           "profile_locations": "registry", "ProfileMeta": "schema", "NAME_PATTERN": "schema"}
 

@@ -26,7 +26,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from realpen import __version__
+from realpen._version import __version__
+from realpen.checks import MAX_FORCE_N, MAX_GRID_POINTS, MAX_SPEED_MM_S
 from realpen.errors import ParameterError, fail
 from realpen.io.limits import read_bounded
 from realpen.io.recording import Recording
@@ -45,15 +46,7 @@ from realpen.profile.schema import (
 from realpen.tactile.actuator import Actuator
 from realpen.tactile.build import build_pattern
 from realpen.tactile.conditions import TactileParams
-from realpen.tactile.grid import (
-    FULL_PRESSURE_FORCE_N,
-    MAX_FORCE_N,
-    MAX_GRID_POINTS,
-    MAX_SPEED_MM_S,
-    VibrationGrid,
-    grid_from_hatt,
-    grid_from_recordings,
-)
+from realpen.tactile.grid import FULL_PRESSURE_FORCE_N, VibrationGrid, grid_from_hatt, grid_from_recordings
 from realpen.tactile.pattern import TactilePattern
 
 if TYPE_CHECKING:
@@ -95,7 +88,7 @@ def profile_from_parts(name: str, tool: str, pattern: TactilePattern, sound: np.
         sound_rate: its rate in Hz.
         sound_section: ``mode``, ``unit_ms``, ``crossfade_ms``, ``start_s``, ``rms_dbfs``,
             ``seam`` of :class:`~realpen.profile.schema.SoundSection`.
-        coupling: the :class:`~realpen.sound.coupling.Coupling` constants.
+        coupling: the :class:`~realpen.motion.coupling.Coupling` constants.
         sources: the input files.
         sound_parameters: the loop search's parameters and scores.
         model: parameters of the generating model, for modelled pens.
@@ -167,7 +160,7 @@ def build_profile(name: str, tool: str,
         actuator: an :class:`~realpen.tactile.actuator.Actuator` or a spec string.
         tactile_params: the tactile pipeline's parameters (default: condition B's).
         unit_ms, crossfade_ms: loop-unit length and wrap crossfade in ms.
-        coupling: the Eq. 1 constants (default: :class:`realpen.sound.coupling.Coupling()`).
+        coupling: the Eq. 1 constants (default: ``Coupling()``, :class:`realpen.motion.coupling.Coupling`).
         model: parameters of the generating model, for modelled pens.
         progress: called as ``progress(done, total)`` during the vibration's analysis (for a
             grid: points done of all points).
@@ -182,7 +175,7 @@ def build_profile(name: str, tool: str,
         RealPenError: a problem with a recording, naming it.
     """
     from realpen.datasets.hatt import HattModelSet
-    from realpen.sound.coupling import Coupling
+    from realpen.motion.coupling import Coupling
     from realpen.sound.loop import SoundLoop, find_loop_unit
 
     check_name(name)
@@ -252,7 +245,7 @@ def read_grid_csv(path: str | os.PathLike) -> list[tuple[float, float, Path]]:
         RealPenError: naming the CSV (and the line, counted as an editor does): a missing or
             unreadable file, a missing header or column, a value that is not a finite number
             from 0 up, a recording that is not there, a (speed, force) given twice, no rows,
-            more than :data:`~realpen.tactile.grid.MAX_GRID_POINTS` rows.
+            more than :data:`~realpen.checks.MAX_GRID_POINTS` rows.
     """
     path = Path(path)
     from realpen.io.files import check_readable_file

@@ -63,8 +63,9 @@ from realpen.tactile.actuator import Actuator
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.grid import VibrationGrid
 from realpen.tactile.pattern import TactilePattern
+from realpen.validation import one_line, validation_line
 
-__all__ = ["PenProfile", "save_profile", "load_profile", "bundle_wavs", "MAX_ZIP_ENTRIES",
+__all__ = ["PenProfile", "save_profile", "read_bundle", "bundle_wavs", "MAX_ZIP_ENTRIES",
            "MAX_ZIP_BYTES", "MAX_FILE_BYTES"]
 
 MAX_FILE_BYTES = {PROFILE_JSON: MAX_JSON_BYTES, TACTILE_WAV: MAX_WAV_BYTES, SOUND_WAV: MAX_WAV_BYTES}
@@ -116,7 +117,7 @@ class PenProfile:
 
     @property
     def coupling(self):
-        """The coupling constants of Eq. 1 (:class:`realpen.sound.coupling.Coupling`)."""
+        """The coupling constants of Eq. 1 (:class:`realpen.motion.coupling.Coupling`)."""
         return self.meta.coupling
 
     @property
@@ -222,7 +223,7 @@ class PenProfile:
                 "sound": {"file": SOUND_WAV, "rate": sound.rate, "frames": len(self.sound),
                           "sha256": _sha(wavs[SOUND_WAV])}})
         except ValidationError as error:  # a WAV loading would refuse: too long, odd rate
-            raise ParameterError("profile", f"files.{_first_error(error)}") from None
+            raise ParameterError("profile", f"files.{validation_line(error)}") from None
         return self.meta.model_copy(update={"files": files})
 
 
@@ -262,7 +263,7 @@ def _read_wav(data: bytes, name: str, source: object, wav: WavFile) -> np.ndarra
                 raise refuse(handle.frames, handle.samplerate)
             samples = handle.read(wav.frames, dtype="float32")
     except (sf.LibsndfileError, RuntimeError, ValueError, TypeError) as error:
-        raise fail(source, f"{name} is not a readable WAV ({_one_line(error)})") from None
+        raise fail(source, f"{name} is not a readable WAV ({one_line(error)})") from None
     if len(samples) != wav.frames:  # the data ended before the header's count
         raise refuse(len(samples), wav.rate)
     return samples
@@ -328,11 +329,6 @@ def save_profile(profile: PenProfile, target: str | os.PathLike) -> Path:
     return target
 
 
-def _one_line(text: object, limit: int = 200) -> str:
-    """``text`` on one line (runs of whitespace made one space), cut to ``limit`` characters:
-    messages quote the bundle's own text, which may hold newlines or run to megabytes."""
-    line = " ".join(str(text).split())
-    return line if len(line) <= limit else line[:limit - 1] + "…"
 
 
 def _check_size(bundle: Path, name: str, size: int, what: str = "is") -> None:
@@ -424,7 +420,7 @@ def _read_zip(path: Path) -> dict[str, bytes]:
                         for name, entry in named.items()}
         except _ZIP_ERRORS as error:
             raise fail(path, f"not a profile folder or a readable .zip "
-                             f"({_one_line(error)})") from None
+                             f"({one_line(error)})") from None
 
 
 def _read_bundle_files(path: Path) -> dict[str, bytes]:
@@ -440,26 +436,14 @@ def _read_bundle_files(path: Path) -> dict[str, bytes]:
     return _read_zip(path)
 
 
-def _first_error(error: ValidationError) -> str:
-    # Without inputs and context: each error's copy of its input could take gigabytes.
-    first = error.errors(include_url=False, include_input=False, include_context=False)[0]
-    # The location can hold the document's own keys (an unknown field): keep them short.
-    where = ".".join(_one_line(part, 40) for part in first["loc"])
-    message = _one_line(first["msg"].removeprefix("Value error, "))
-    return f"{where}: {message}" if where else message
 
 
-def load_profile(path: str | os.PathLike) -> PenProfile:
-    """Load and check a bundle (folder or ``.zip``) of format 1, 2 or 3.
+def read_bundle(path: str | os.PathLike) -> PenProfile:
+    """Read and check the bundle (folder or ``.zip``) of format 1, 2 or 3 at ``path``.
 
-    Args:
-        path: the bundle's folder or ``.zip``; a bare name that is no file here (``"pencil"``)
-            is looked up among the installed profiles
-            (:func:`realpen.profile.registry.resolve_profile`).
-
-    Example:
-        >>> load_profile("pencil").meta.tactile
-        TactilePattern(15 sub-patterns × 100 ms, 10 components each, 8000 Hz)
+    Finding a profile by name is :func:`realpen.profile.registry.resolve_profile`'s (and
+    :func:`~realpen.profile.registry.load_profile`'s): the one place a name or a path is told
+    apart. This reads a path only.
 
     Raises:
         RealPenError: a missing file, an unknown format version, a schema violation, WAVs
@@ -467,21 +451,8 @@ def load_profile(path: str | os.PathLike) -> PenProfile:
             oversized zip — each as one line naming the bundle (no other exception, whatever
             the bundle's bytes).
     """
-    text = os.fspath(path)
-    if not text.strip():  # Path("") is the current folder, which is not what was meant
-        raise fail("profile", "the name or path is empty; give a pen's name or a bundle")
-    path = Path(path)
     try:
-        exists = path.exists()
-    except OSError:  # something is there that cannot be looked at: the reader names it
-        exists = True
-    if not exists and os.sep not in text and (os.altsep or os.sep) not in text \
-            and path.suffix.lower() != ".zip":
-        from realpen.profile.registry import resolve_profile
-
-        return resolve_profile(text)
-    try:
-        return _load_bundle(path)
+        return _load_bundle(Path(path))
     except RealPenError as error:
         # One line even when the bundle's own name holds a newline.
         if len(str(error).splitlines()) > 1:
@@ -499,13 +470,13 @@ def _load_bundle(path: Path) -> PenProfile:
     if not isinstance(document, dict):
         raise fail(path, f"{PROFILE_JSON} must hold a JSON object")
     if type(document.get("format")) is not int or document["format"] not in READABLE_FORMATS:
-        raise fail(path, f"unknown profile format {_one_line(repr(document.get('format')), 40)} "
+        raise fail(path, f"unknown profile format {one_line(repr(document.get('format')), 40)} "
                          f"(this RealPen reads formats {', '.join(map(str, READABLE_FORMATS))}; "
                          f"it writes {FORMAT})")
     try:
         meta = ProfileMeta.model_validate(upgrade(document))
     except ValidationError as error:
-        raise fail(path, f"{PROFILE_JSON}: {_first_error(error)}") from None
+        raise fail(path, f"{PROFILE_JSON}: {validation_line(error)}") from None
     arrays = {}
     for name, wav in ((TACTILE_WAV, meta.files.tactile), (SOUND_WAV, meta.files.sound)):
         data = files[name]

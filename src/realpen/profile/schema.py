@@ -40,8 +40,8 @@ their bytes, and so their SHA-256, can differ in the last bits of a float betwee
 
 Limits. Every number is finite, and the sizes are bounded so that no ``profile.json`` can
 make a reader allocate much: each WAV holds at most :data:`MAX_WAV_FRAMES` frames and is at
-most :data:`MAX_WAV_BYTES` bytes, rates are :data:`realpen.io.limits.MIN_RATE_HZ` to
-:data:`realpen.io.limits.MAX_RATE_HZ`, lengths in ms at most :data:`MAX_SECTION_MS`.
+most :data:`MAX_WAV_BYTES` bytes, rates are :data:`realpen.checks.MIN_RATE_HZ` to
+:data:`realpen.checks.MAX_RATE_HZ`, lengths in ms at most :data:`MAX_SECTION_MS`.
 
 Imports pydantic and numpy only (the Coupling type is loaded when a document is validated), so
 the WebSocket schema can import :data:`NAME_PATTERN` without scipy or soundfile.
@@ -71,10 +71,11 @@ from pydantic import (
     model_validator,
 )
 
-from realpen.io.limits import MAX_RATE_HZ, MIN_RATE_HZ
+from realpen.checks import MAX_GRID_POINTS, MAX_RATE_HZ, MIN_RATE_HZ
 from realpen.tactile.actuator import KINDS, Actuator
-from realpen.tactile.grid import MAX_GRID_POINTS, GridPoint, VibrationGrid
+from realpen.tactile.grid import GridPoint, VibrationGrid
 from realpen.tactile.pattern import Component, TactilePattern, content_version, json_fields
+from realpen.validation import validation_line
 
 __all__ = ["FORMAT", "READABLE_FORMATS", "NAME_PATTERN", "PROFILE_JSON", "TACTILE_WAV",
            "SOUND_WAV", "BUNDLE_FILES", "ComponentModel", "TactileModel", "SoundSection",
@@ -92,7 +93,7 @@ BUNDLE_FILES = (PROFILE_JSON, TACTILE_WAV, SOUND_WAV)
 MAX_WAV_FRAMES = 2**24
 """The most frames (samples; the WAVs are mono) of a bundle's ``tactile.wav`` or ``sound.wav``:
 16,777,216, 64 MiB as 32-bit float — the longest tactile pattern RealPen synthesises
-(:data:`realpen.tactile.synthesis.MAX_PATTERN_FRAMES`, the same number), so every pattern and
+(:data:`realpen.checks.MAX_PATTERN_FRAMES`, the same number), so every pattern and
 every sound unit (at most 60 s) it builds can be bundled, while a forged header cannot ask for
 gigabytes. A method's pattern is 1.5 s (12,000 frames at 8 kHz) and its sound unit 300 ms."""
 MAX_WAV_BYTES = 4 * MAX_WAV_FRAMES + 64 * 1024
@@ -177,24 +178,22 @@ ActuatorField = Annotated[Any, PlainValidator(Actuator.from_json), PlainSerializ
 
 
 def _coupling(value: Any):
-    from realpen.sound.coupling import Coupling
+    from realpen.motion.coupling import Coupling
 
     if isinstance(value, Coupling):
         return value
     try:
         return Coupling.model_validate(value)
     except ValidationError as error:
-        first = error.errors()[0]
-        where = ".".join(str(part) for part in first["loc"])
-        message = first["msg"].removeprefix("Value error, ")  # pydantic adds it again outside
-        raise ValueError(f"{where}: {message}" if where else message) from None
+        # Without "Value error, ": pydantic adds it again outside.
+        raise ValueError(validation_line(error)) from None
 
 
 CouplingField = Annotated[Any, PlainValidator(_coupling),
                           PlainSerializer(lambda coupling: coupling.model_dump(mode="json")),
                           WithJsonSchema({"type": "object",
                                           "description": "realpen.coupling/1 "
-                                                         "(realpen.sound.coupling.Coupling)"})]
+                                                         "(realpen.motion.coupling.Coupling)"})]
 
 
 class SoundSection(_Strict):
@@ -298,7 +297,7 @@ class ProfileMeta(_Strict):
     ``tactile`` is a :class:`~realpen.tactile.pattern.TactilePattern` (without samples),
     ``grid`` a :class:`~realpen.tactile.grid.VibrationGrid` or None (then left out of the
     JSON), ``actuator`` an :class:`~realpen.tactile.actuator.Actuator`, ``coupling`` a
-    :class:`~realpen.sound.coupling.Coupling`. ``format`` is set to the lowest format that
+    :class:`~realpen.motion.coupling.Coupling`. ``format`` is set to the lowest format that
     holds the profile (:func:`needed_format`); a format-2 document with a residual or a grid
     is refused.
     """

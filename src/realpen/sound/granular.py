@@ -18,38 +18,30 @@ faster strokes are made brighter.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from realpen.dsp.limits import MAX_SEED
+from realpen.checks import MAX_MS, check_level, check_ms, check_seed, check_sound_rate
+from realpen.defaults import GRAIN_MS, TEXTURE_LENGTH_MS
 from realpen.errors import ParameterError, fail
 from realpen.io.recording import Recording
 from realpen.sound.loop import (
     DEFAULT_RATE,
     EDGE_MS,
     HOP_MS,
-    MAX_MS,
     REFERENCE_DBFS,
     SILENCE_DB,
     SoundLoop,
-    _mono,
-    _own_rate,
-    check_level,
-    check_ms,
-    check_rate,
     load_sound,
-    require_sound,
-    samples_for,
     seam_report,
 )
+from realpen.sound.unit import SteadyPart, loop_rate, mono_signal, require_sound, samples_for
 
-__all__ = ["SteadyPart", "steady_part", "check_seed", "grain_samples", "granular", "granular_loop",
+__all__ = ["steady_part", "grain_samples", "granular", "granular_loop",
            "GRAIN_MS", "LENGTH_MS", "MAX_LENGTH_MS", "STEADY_DB", "LEVEL_SMOOTH_MS"]
 
-GRAIN_MS = 50.0
-LENGTH_MS = 3000.0
+LENGTH_MS = TEXTURE_LENGTH_MS
 MAX_LENGTH_MS = MAX_MS  # longest texture: 60 s (23 MB at 48 kHz); a loop need not be longer
 STEADY_DB = 6.0
 LEVEL_SMOOTH_MS = 100.0
@@ -57,25 +49,6 @@ _BLOCK = 1024  # grains rendered at once, at most
 _BLOCK_VALUES = 2**22  # grain samples rendered at once (32 MiB per array), however long a grain
 
 
-@dataclass(frozen=True, repr=False, eq=False)
-class SteadyPart:
-    """Where grains may come from.
-
-    Attributes:
-        starts: allowed first samples of a grain, ascending.
-        span: samples a grain may read from its start.
-        stretches: contiguous steady stretches as (start, stop) samples.
-        rms: RMS of the recording over those stretches (linear, full scale).
-    """
-
-    starts: np.ndarray
-    span: int
-    stretches: list[tuple[int, int]]
-    rms: float
-
-    def __repr__(self) -> str:
-        return (f"SteadyPart({len(self.starts)} grain starts in {len(self.stretches)} "
-                f"stretch(es), span {self.span} samples, rms {self.rms:.4g})")
 
 
 def steady_part(x: np.ndarray, rate: float, span_ms: float, tolerance_db: float = STEADY_DB,
@@ -94,7 +67,7 @@ def steady_part(x: np.ndarray, rate: float, span_ms: float, tolerance_db: float 
         RealPenError: silence, or no steady stretch as long as ``span_ms``.
     """
     x = np.asarray(x, dtype=np.float64)
-    check_rate(rate)
+    check_sound_rate(rate)
     check_ms("span_ms", span_ms, maximum=None)  # from a checked grain: up to rate_max × grain
     require_sound(x, source)
     block = max(1, int(HOP_MS * rate / 1000))
@@ -130,17 +103,6 @@ def steady_part(x: np.ndarray, rate: float, span_ms: float, tolerance_db: float 
                       rms=float(np.sqrt(np.mean(covered ** 2))))
 
 
-def check_seed(seed: int) -> int:
-    """``seed`` (of the random grain offsets) as an int from 0 to
-    :data:`~realpen.dsp.limits.MAX_SEED`.
-
-    Raises:
-        ParameterError: (parameter ``seed``) otherwise.
-    """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
-            or not 0 <= seed <= MAX_SEED:
-        raise ParameterError("seed", f"must be a whole number from 0 to {MAX_SEED}, got {seed!r}")
-    return int(seed)
 
 
 def grain_samples(grain_ms: float, rate: float) -> int:
@@ -258,11 +220,11 @@ def granular_loop(sound: Recording | np.ndarray | SoundLoop | str | os.PathLike,
         sound = load_sound(sound, DEFAULT_RATE if rate is None else rate)
         rate = None
     if isinstance(sound, SoundLoop):
-        x, rate = sound.samples, _own_rate(sound, rate)
+        x, rate = sound.samples, loop_rate(sound, rate)
         name = source or sound.source or "loop"
         provenance = (sound.source, sound.source_sha256, sound.history)
     else:
-        x, rate, recording, name = _mono(sound, rate, source)
+        x, rate, recording, name = mono_signal(sound, rate, source)
         provenance = ((recording.source, recording.sha256, recording.history) if recording
                       else (None, None, ()))
     check_ms("grain_ms", grain_ms)

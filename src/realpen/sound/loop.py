@@ -35,14 +35,15 @@ One type. A :class:`SoundLoop` is every sound unit RealPen plays: a unit found b
 WAV file that declares its loop in a ``smpl`` chunk (as ``realpen sound loop`` writes it; see
 :func:`load_sound`). Stroke rendering, profiles and exports all take it.
 
-Limits, checked wherever a value is taken: rates from ``MIN_RATE`` (8 kHz: the bands need room
-between 100 Hz and 0.45 × rate) to ``MAX_RATE`` (384 kHz); lengths in ms finite, positive and
-at most ``MAX_MS`` (a minute); a
+Limits, checked wherever a value is taken (:mod:`realpen.checks`): rates from
+:data:`~realpen.checks.MIN_SOUND_RATE_HZ` (8 kHz: the bands need room between 100 Hz and
+0.45 × rate) to :data:`~realpen.checks.MAX_RATE_HZ` (384 kHz); lengths in ms finite, positive
+and at most :data:`~realpen.checks.MAX_MS` (a minute); a
 loop level (RMS, dBFS) finite and at most 0 dBFS. A bad argument raises
 :class:`~realpen.errors.ParameterError` naming the Python parameter (``unit_ms``, ``rate``,
 ``level_dbfs``, ...); bad data (a file, a recording that is silent — digital silence or a
-constant (DC) value, RMS below ``SILENT_DBFS`` with its mean removed — or too short) raises
-:class:`~realpen.errors.RealPenError` naming the source.
+constant (DC) value, RMS below :data:`~realpen.sound.unit.SILENT_DBFS` with its mean
+removed — or too short) raises :class:`~realpen.errors.RealPenError` naming the source.
 """
 
 from __future__ import annotations
@@ -51,163 +52,55 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from realpen import __version__
+from realpen._version import __version__
+from realpen.checks import check_level, check_ms, check_sound_rate, is_number, sound_rate_problem
+from realpen.defaults import (
+    SOUND_CROSSFADE_MS,
+    SOUND_MODES,
+    SOUND_RATE_HZ,
+    SOUND_REFERENCE_DBFS,
+    SOUND_UNIT_MS,
+)
 from realpen.dsp.filters import resample
 from realpen.errors import ParameterError, fail
 from realpen.io.files import read_smpl_loop, wav_bytes, write_wav
-from realpen.io.limits import MAX_RATE_HZ
 from realpen.io.recording import Recording, load_recording
-
-if TYPE_CHECKING:
-    from realpen.sound.granular import SteadyPart
+from realpen.sound.unit import (
+    SteadyPart,
+    check_source_rate,
+    level_db,
+    mono_signal,
+    require_sound,
+    samples_for,
+)
 
 __all__ = [
     "SoundLoop", "Seam", "Scan", "find_loop", "find_loop_unit", "load_sound", "seam_report",
-    "scan_windows", "make_loop", "crossfade_gains", "band_levels_db", "normalise", "level_db",
-    "require_sound", "samples_for", "check_ms", "check_rate", "check_level", "ProgressCallback",
-    "DEFAULT_RATE", "UNIT_MS", "CROSSFADE_MS", "EDGE_MS", "HOP_MS", "SILENCE_DB", "SILENT_DBFS",
-    "REFERENCE_DBFS", "MAX_LEVEL_DBFS", "MIN_RATE", "MAX_RATE", "MAX_MS", "FLOOR_DB", "BANDS",
-    "WEIGHTS",
-    "MODES",
+    "scan_windows", "make_loop", "crossfade_gains", "band_levels_db", "normalise",
+    "ProgressCallback", "DEFAULT_RATE", "UNIT_MS", "CROSSFADE_MS", "EDGE_MS", "HOP_MS",
+    "SILENCE_DB", "REFERENCE_DBFS", "FLOOR_DB", "BANDS", "WEIGHTS", "MODES",
 ]
 
-DEFAULT_RATE = 48000
-UNIT_MS = 300.0
-CROSSFADE_MS = 10.0
+DEFAULT_RATE = SOUND_RATE_HZ
+UNIT_MS = SOUND_UNIT_MS
+CROSSFADE_MS = SOUND_CROSSFADE_MS
 EDGE_MS = 20.0          # head/tail length for level and spectrum
 HOP_MS = 5.0            # scan step; the issue asks for ≤ 5 ms
 SILENCE_DB = 30.0       # below the recording's loud frames: near silence
-SILENT_DBFS = -90.0     # a whole recording quieter than this is silence (16-bit LSB ≈ −96 dBFS)
-REFERENCE_DBFS = -20.0  # RMS of a normalised loop: the level that coupling gain 1 plays at
-MAX_LEVEL_DBFS = 0.0    # highest loop level (RMS) accepted
-MIN_RATE = 8000.0       # Hz; below it the 100 Hz–0.45·rate bands of the seam measures collapse
-MAX_RATE = float(MAX_RATE_HZ)  # Hz; the highest common audio rate
+REFERENCE_DBFS = SOUND_REFERENCE_DBFS  # RMS of a normalised loop: coupling gain 1 plays at it
 FLOOR_DB = 80.0         # band levels further below the loud frames are treated as equal
-MAX_MS = 60000.0
-"""The longest length (ms) a loop unit, crossfade, grain or texture may have: a minute. Every
-length is checked against it (:func:`check_ms`) before any array is sized by it."""
 BANDS = (24, 100.0, 16000.0)
 WEIGHTS = {"level_jump_db": 3.0, "spectral_db": 1.0, "stationarity_db": 1.0,
            "quietness_db": 1.0}
-MODES = ("loop", "granular")
+MODES = SOUND_MODES
 NOT_AUDIO = (".csv", ".npz", ".json", ".txt")
 _CHUNK = 2048  # frames per FFT block, to bound memory on long recordings
 
 ProgressCallback = Callable[[int, int], None]  # (windows done, windows in all)
-
-
-def samples_for(ms: float, rate: float) -> int:
-    """Number of samples in ``ms`` milliseconds at ``rate`` Hz (rounded)."""
-    return int(round(ms * rate / 1000.0))
-
-
-def _is_number(value) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-
-
-def check_ms(parameter: str, value: float, maximum: float | None = MAX_MS) -> float:
-    """Return ``value`` (a length in ms) as float.
-
-    Args:
-        parameter: the Python parameter that gave it, e.g. ``"unit_ms"``, for the message.
-        value: the length in ms.
-        maximum: the longest length accepted in ms (default :data:`MAX_MS`; None: no limit,
-            for lengths computed from checked ones).
-
-    Raises:
-        ParameterError: ``value`` is not a finite number of ms above 0, or above ``maximum``.
-    """
-    if not _is_number(value) or not np.isfinite(value) or value <= 0:
-        shown = f"{value:g}" if _is_number(value) else repr(value)
-        raise ParameterError(parameter, f"must be a finite number of ms above 0, got {shown}")
-    if maximum is not None and value > maximum:
-        raise ParameterError(parameter, f"must be at most {maximum:g} ms "
-                                        f"({maximum / 1000:g} s), got {value:g}")
-    return float(value)
-
-
-def _rate_problem(rate) -> str | None:
-    """What is wrong with a sample rate in Hz, or None."""
-    if not _is_number(rate) or not np.isfinite(rate) or rate <= 0:
-        shown = f"{rate:g}" if _is_number(rate) else repr(rate)
-        return f"must be a positive number of Hz, got {shown}"
-    if rate < MIN_RATE:
-        return (f"{rate:g} Hz is too low for friction sound; the minimum is {MIN_RATE:g} Hz "
-                f"(the seam is judged on bands from 100 Hz up to 0.45 × rate)")
-    if rate > MAX_RATE:
-        return f"{rate:g} Hz is too high; the maximum is {MAX_RATE:g} Hz"
-    return None
-
-
-def check_rate(rate: float, parameter: str = "rate") -> float:
-    """Return a sample rate in Hz as float, between ``MIN_RATE`` and ``MAX_RATE`` Hz.
-
-    Args:
-        rate: sample rate in Hz.
-        parameter: the Python parameter that gave it, for the message.
-
-    Raises:
-        ParameterError: a rate that is not finite, or outside 8 kHz – 384 kHz.
-    """
-    problem = _rate_problem(rate)
-    if problem is not None:
-        raise ParameterError(parameter, problem)
-    return float(rate)
-
-
-def _check_source_rate(rate: float, source: object) -> float:
-    """Like :func:`check_rate` for a rate that a file or a recording carries: a data problem."""
-    problem = _rate_problem(rate)
-    if problem is not None:
-        raise fail(source, problem if not problem.startswith("must") else f"rate {problem}")
-    return float(rate)
-
-
-def check_level(level_dbfs: float, parameter: str = "level_dbfs") -> float:
-    """Return a loop level (RMS in dB re full scale, dBFS) as float; finite, ≤ ``MAX_LEVEL_DBFS``.
-
-    Args:
-        level_dbfs: RMS level in dBFS.
-        parameter: the Python parameter that gave it, for the message.
-
-    Raises:
-        ParameterError: not a finite level of at most 0 dBFS.
-    """
-    if not _is_number(level_dbfs) or not np.isfinite(level_dbfs) or level_dbfs > MAX_LEVEL_DBFS:
-        shown = f"{level_dbfs:g}" if _is_number(level_dbfs) else repr(level_dbfs)
-        raise ParameterError(parameter, f"must be a finite level of at most {MAX_LEVEL_DBFS:g} "
-                                        f"dBFS, got {shown}")
-    return float(level_dbfs)
-
-
-def level_db(x: np.ndarray) -> float:
-    """RMS level of ``x`` (full scale ±1) in dB re full scale, i.e. dBFS (−inf for silence)."""
-    power = float(np.mean(np.square(x))) if len(x) else 0.0
-    return float(10 * np.log10(power)) if power > 0 else float("-inf")
-
-
-def require_sound(x: np.ndarray, source: object) -> None:
-    """Raise :class:`RealPenError` when ``x`` is silent: its RMS with its mean removed lies below
-    ``SILENT_DBFS`` dBFS.
-
-    The mean is removed so that a constant (DC) signal, which holds no sound however large its
-    value, counts as silence too.
-    """
-    x = np.asarray(x, dtype=np.float64)
-    level = level_db(x - np.mean(x)) if len(x) else -np.inf
-    if level < SILENT_DBFS:
-        if len(x) and np.ptp(x) == 0 and x[0] != 0:
-            shown = f"a constant value of {x[0]:g}: a DC offset, no sound"
-        elif not np.any(x):
-            shown = "digital silence"
-        else:
-            shown = f"RMS {level:.0f} dBFS with the DC offset removed"
-        raise fail(source, f"recording is silent ({shown})")
 
 
 def load_sound(path: str | os.PathLike, rate: float | None = DEFAULT_RATE
@@ -223,7 +116,7 @@ def load_sound(path: str | os.PathLike, rate: float | None = DEFAULT_RATE
     Args:
         path: the audio file.
         rate: resample to this rate in Hz (default 48 kHz); None keeps the file's rate. Either
-            must lie between ``MIN_RATE`` (8 kHz) and ``MAX_RATE`` (384 kHz).
+            must lie between 8 kHz and 384 kHz.
 
     Returns:
         A one-axis :class:`~realpen.io.recording.Recording` (axis ``"mono"``, full scale ±1),
@@ -244,7 +137,7 @@ def load_sound(path: str | os.PathLike, rate: float | None = DEFAULT_RATE
     """
     path = Path(path)
     if rate is not None:
-        check_rate(rate)
+        check_sound_rate(rate)
     if path.suffix.lower() in NOT_AUDIO:
         raise fail(path, "not an audio file (give a WAV, FLAC or OGG recording)")
     loaded = load_recording(path)
@@ -259,7 +152,7 @@ def load_sound(path: str | os.PathLike, rate: float | None = DEFAULT_RATE
     require_sound(mono, path)
     sound = loaded.with_samples(mono[:, None], step, axes=("mono",))
     if rate is None:
-        _check_source_rate(sound.rate, path)
+        check_source_rate(sound.rate, path)
     else:
         sound = resample(sound, float(rate))
     require_sound(sound.mono, path)
@@ -273,7 +166,7 @@ def _ready_loop(loaded: Recording, mono: np.ndarray, step: str, points: tuple[in
     if end >= len(mono):
         raise fail(path, f"the smpl chunk's loop ({start}–{end}) lies outside the file's "
                          f"{len(mono)} frames")
-    _check_source_rate(loaded.rate, path)
+    check_source_rate(loaded.rate, path)
     samples = np.array(mono[start:end + 1], dtype=np.float64)
     require_sound(samples, path)
     history = loaded.history + (step, f"smpl-loop:{start}-{end}")
@@ -297,7 +190,7 @@ def normalise(x: np.ndarray, level_dbfs: float = REFERENCE_DBFS) -> tuple[np.nda
         level_dbfs: the RMS to reach in dBFS (finite, at most 0).
 
     Raises:
-        ParameterError: ``level_dbfs`` not finite or above ``MAX_LEVEL_DBFS`` (0 dBFS).
+        ParameterError: ``level_dbfs`` not finite or above :data:`~realpen.checks.MAX_LEVEL_DBFS` (0 dBFS).
     """
     check_level(level_dbfs)
     level = level_db(x)
@@ -423,7 +316,7 @@ def seam_report(loop: np.ndarray, rate: float, edge_ms: float = EDGE_MS,
 
     Args:
         loop: the looping signal, shape (frames,), full scale ±1.
-        rate: its rate in Hz (``MIN_RATE`` to ``MAX_RATE``).
+        rate: its rate in Hz (8 kHz to 384 kHz).
         edge_ms: frame length in ms for levels and spectra.
         hop_ms: step in ms between the inside frame pairs.
         source: names the loop in error messages.
@@ -436,7 +329,7 @@ def seam_report(loop: np.ndarray, rate: float, edge_ms: float = EDGE_MS,
         RealPenError: a loop shorter than three frames.
     """
     loop = np.asarray(loop, dtype=np.float64)
-    check_rate(rate)
+    check_sound_rate(rate)
     check_ms("edge_ms", edge_ms)
     check_ms("hop_ms", hop_ms)
     edge, hop = samples_for(edge_ms, rate), max(1, int(hop_ms * rate / 1000))
@@ -493,7 +386,7 @@ def scan_windows(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
 
     Args:
         x: the recording, shape (frames,), full scale ±1.
-        rate: its rate in Hz (``MIN_RATE`` to ``MAX_RATE``).
+        rate: its rate in Hz (8 kHz to 384 kHz).
         unit_ms, crossfade_ms, hop_ms, edge_ms: unit, wrap crossfade, scan step and head/tail
             frame lengths in ms, each finite and positive.
         compensate: correlation-compensated crossfade (see the module doc).
@@ -508,7 +401,7 @@ def scan_windows(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
             near-silence.
     """
     x = np.asarray(x, dtype=np.float64)
-    check_rate(rate)
+    check_sound_rate(rate)
     for name, value in (("unit_ms", unit_ms), ("crossfade_ms", crossfade_ms),
                         ("hop_ms", hop_ms), ("edge_ms", edge_ms)):
         check_ms(name, value)
@@ -655,7 +548,7 @@ class SoundLoop:
         if samples.ndim != 1 or len(samples) == 0:
             raise ParameterError("samples", f"must be a non-empty mono array of shape (frames,), "
                                             f"got shape {samples.shape}")
-        if not _is_number(self.rate) or not np.isfinite(self.rate) or self.rate <= 0:
+        if not is_number(self.rate) or not np.isfinite(self.rate) or self.rate <= 0:
             raise ParameterError("rate", f"must be a positive number of Hz, got {self.rate!r}")
         if self.mode not in MODES:
             raise ParameterError("mode", f"unknown value {self.mode!r} (choose from "
@@ -680,7 +573,7 @@ class SoundLoop:
         """
         samples = np.asarray(samples, dtype=np.float64)
         seam = None
-        if _rate_problem(rate) is None and len(samples) >= 3 * samples_for(EDGE_MS, rate):
+        if sound_rate_problem(rate) is None and len(samples) >= 3 * samples_for(EDGE_MS, rate):
             seam = seam_report(samples, rate, source=source or "loop")
         return cls(samples=samples, rate=rate, mode="loop", start_s=start_s,
                    unit_ms=len(samples) / float(rate) * 1000, seam=seam, source=source,
@@ -786,39 +679,8 @@ class SoundLoop:
                 f"{where}, rms {self.rms_dbfs:.1f} dBFS{seam}{source})")
 
 
-def _mono(sound, rate: float | None, source: object | None
-          ) -> tuple[np.ndarray, float, Recording | None, object]:
-    """(mono samples, rate in Hz, the recording if any, the source's name) of a recording or an
-    array; a recording is mixed down and, when ``rate`` differs from its own, resampled."""
-    if isinstance(sound, Recording):
-        recording = sound
-        channels = recording.samples.shape[1]
-        if channels > 1:
-            recording = recording.with_samples(recording.samples.mean(axis=1)[:, None],
-                                               f"mixdown:{channels}ch", axes=("mono",))
-        if rate is not None:
-            check_rate(rate)
-            recording = resample(recording, float(rate))
-        name = recording.source if source is None else source
-        _check_source_rate(recording.rate, name)
-        return recording.mono, float(recording.rate), recording, name
-    x = np.asarray(sound, dtype=np.float64)
-    if x.ndim == 2:
-        x = x.mean(axis=1)
-    if x.ndim != 1:
-        raise ParameterError("sound", f"must be samples of shape (frames,) or (frames, "
-                                      f"channels), got shape {x.shape}")
-    if rate is None:
-        raise ParameterError("rate", "needed in Hz for an array of samples")
-    return x, check_rate(rate), None, "signal" if source is None else source
 
 
-def _own_rate(loop: SoundLoop, rate: float | None) -> float:
-    """The rate of a sound loop, which plays at its own rate: ``rate``, if given, must be it."""
-    if rate is not None and abs(float(rate) - loop.rate) > 1e-9:
-        raise ParameterError("rate", f"a sound loop plays at its own rate ({loop.rate:g} Hz), "
-                                     f"got {rate:g}")
-    return check_rate(loop.rate)
 
 
 def find_loop_unit(x: np.ndarray, rate: float, unit_ms: float = UNIT_MS,
@@ -909,7 +771,7 @@ def find_loop(sound: Recording | np.ndarray | SoundLoop | str | os.PathLike, *,
         rate = None
     if isinstance(sound, SoundLoop):
         return sound if level_dbfs is None else sound.normalised(level_dbfs)
-    x, rate, recording, name = _mono(sound, rate, source)
+    x, rate, recording, name = mono_signal(sound, rate, source)
     loop = find_loop_unit(x, rate, unit_ms, crossfade_ms, hop_ms, compensate, source=name,
                           recording=recording, progress=progress)
     return loop if level_dbfs is None else loop.normalised(level_dbfs)

@@ -24,7 +24,8 @@ import pingouin as pg
 import scipy.stats
 from statsmodels.stats.multitest import multipletests
 
-from realpen.errors import ParameterError, require_choice
+from realpen.checks import require_choice
+from realpen.errors import ParameterError
 from realpen.stats.contrasts import ZERO_FRACTION, anovarm_f, contrast_decomposition, effect_name, effects
 from realpen.stats.long import MAX_FACTORS, balanced_wide, factor_list, safe_long
 from realpen.stats.nonparametric import WILCOXON_METHODS, wilcoxon

@@ -13,7 +13,8 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 
-from realpen.errors import ParameterError, require_choice
+from realpen.checks import require_choice
+from realpen.errors import ParameterError
 from realpen.stats.long import cell_text, check_columns, shown_level
 
 __all__ = ["mean_ci", "cell_cis", "CI_METHODS"]

@@ -16,7 +16,8 @@ import pandas as pd
 import pingouin as pg
 import scipy.stats
 
-from realpen.errors import ParameterError, require_choice
+from realpen.checks import require_choice
+from realpen.errors import ParameterError
 from realpen.stats.long import balanced_wide, shown_level
 from realpen.stats.results import TEST_COLUMNS, tidy
 from realpen.stats.results import test_row as _result_row  # pytest would collect "test_row"

@@ -60,7 +60,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from realpen.errors import ParameterError, require_number
+from realpen.checks import require_number
+from realpen.errors import ParameterError
 from realpen.stats.simulate import (
     ResponseModel,
     check_inputs,

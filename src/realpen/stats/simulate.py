@@ -50,7 +50,8 @@ import numpy as np
 import pandas as pd
 from scipy import special, stats
 
-from realpen.errors import ParameterError, fail, require_number
+from realpen.checks import require_number
+from realpen.errors import ParameterError, fail
 from realpen.study.design import Design
 from realpen.study.export import KEY_COLUMNS
 from realpen.study.plan import MAX_PARTICIPANTS, PlannedTrial, participant_plan

@@ -47,7 +47,8 @@ from pathlib import Path
 
 import numpy as np
 
-from realpen.errors import ParameterError, require_number
+from realpen.checks import require_number
+from realpen.errors import ParameterError
 from realpen.study.design import Block, Design
 
 __all__ = ["williams", "sequences", "PlannedTrial", "participant_plan", "block_orders",

@@ -11,9 +11,13 @@ Lives here:
 - :mod:`~realpen.tactile.build` — the pipeline from a recording to a pattern
   (:func:`build_pattern`, :func:`tactile_pattern`).
 
-May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.dsp` (only ``build`` does;
-the types, synthesis and conditions need numpy alone, so the profile schema stays light). This
-``__init__`` imports nothing until a name is used.
+May import (the ``layers`` contract of ``[tool.importlinter]`` in ``pyproject.toml``, checked by
+``lint-imports``): :mod:`realpen.motion`, :mod:`realpen.datasets`, :mod:`realpen.dsp`,
+:mod:`realpen.io`, :mod:`realpen.checks` and the stdlib-only modules (:mod:`realpen.errors`,
+:mod:`realpen.validation`, :mod:`realpen.defaults`, ``realpen._version``, ``realpen._lazy``,
+:mod:`realpen.examples`); never :mod:`realpen.sound`, its sibling (what both need is
+:mod:`realpen.motion`'s). The types, synthesis and conditions need numpy alone, so the profile
+schema stays light. This ``__init__`` imports nothing until a name is used.
 """
 
 from __future__ import annotations

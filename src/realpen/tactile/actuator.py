@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from realpen.dsp.limits import MAX_CAP_DB
-from realpen.errors import ParameterError, fail, require_number
+from realpen.checks import MAX_CAP_DB, require_number
+from realpen.errors import ParameterError, fail
 
 __all__ = ["Actuator", "Weighting", "MODEL_DEFAULTS", "KINDS", "parse_actuator", "as_actuator",
            "load_measured", "weighting"]
@@ -279,7 +279,7 @@ def weighting(actuator: Actuator, frequencies_hz: np.ndarray, band_hz: tuple[flo
 
     Raises:
         ParameterError: a ``cap_db`` that is negative, not finite or above
-            :data:`~realpen.dsp.limits.MAX_CAP_DB`.
+            :data:`~realpen.checks.MAX_CAP_DB`.
     """
     actuator = as_actuator(actuator)
     require_number("cap_db", cap_db, minimum=0.0, maximum=MAX_CAP_DB)

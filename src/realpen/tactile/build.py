@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from realpen.checks import MAX_BANDS, MAX_LEVELS
 from realpen.dsp.filters import prepare
 from realpen.dsp.spectrum import ProgressCallback, analyze, principal_frequencies
 from realpen.dsp.tracks import continuous_phases, joins, link_components
@@ -46,14 +47,7 @@ from realpen.io.recording import Recording, as_recording
 from realpen.tactile.actuator import Actuator, as_actuator, weighting
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.pattern import Component, TactilePattern
-from realpen.tactile.residual import (
-    MAX_BANDS,
-    MAX_LEVELS,
-    Residual,
-    render_residual,
-    residual_bands,
-    residual_envelope,
-)
+from realpen.tactile.residual import Residual, render_residual, residual_bands, residual_envelope
 from realpen.tactile.synthesis import synthesize
 
 __all__ = ["build_pattern", "tactile_pattern", "DEFAULT_ACTUATOR"]

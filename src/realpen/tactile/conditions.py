@@ -11,37 +11,39 @@ analyse the 15 units' concatenation as one unit (``selection_unit_ms=100`` with
 A condition sets the counts. ``TactileParams(condition="D")`` has D's ``top``, ``subpatterns``
 and ``unit_ms``; giving a condition together with a count that disagrees with it is refused.
 
-Only numpy-free code here (the errors module); importing it is cheap.
+Only numpy-free code here (:mod:`realpen.checks`, :mod:`realpen.defaults`, the errors); importing
+it is cheap. The conditions and the models are defined in :mod:`realpen.defaults`, which the
+command line's help reads without loading numpy.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
 
-from realpen.dsp.limits import MAX_CAP_DB, MAX_SEED, MAX_SUBPATTERNS, MAX_TOP, MAX_UNIT_MS
-from realpen.errors import ParameterError, require_choice, require_number
-from realpen.io.limits import MAX_RATE_HZ, MIN_RATE_HZ
-from realpen.tactile.synthesis import BOUNDARIES, check_frames, check_rate, subpattern_samples
+from realpen.checks import (
+    MAX_CAP_DB,
+    MAX_RATE_HZ,
+    MAX_SEED,
+    MAX_SUBPATTERNS,
+    MAX_TOP,
+    MAX_UNIT_MS,
+    MIN_RATE_HZ,
+    check_frames,
+    check_pattern_rate,
+    require_choice,
+    require_number,
+)
+from realpen.defaults import CONDITIONS, RECOMMENDED_MODEL, TACTILE_MODELS
+from realpen.errors import ParameterError
+from realpen.tactile.synthesis import BOUNDARIES, subpattern_samples
 
 __all__ = ["CONDITIONS", "SELECTION_UNIT_MS", "AMPLITUDE_MODES", "SELECTIONS", "MODELS", "RECOMMENDED_MODEL",
            "TactileParams"]
 
-# Study 1 conditions: (principal frequencies, sub-patterns, sub-pattern length in ms).
-CONDITIONS: dict[str, tuple[int, int, float]] = {
-    "A": (5, 15, 100.0), "B": (10, 15, 100.0), "C": (15, 15, 100.0),
-    "D": (5, 1, 1500.0), "E": (10, 1, 1500.0), "F": (15, 1, 1500.0),
-}
 SELECTION_UNIT_MS = 100.0  # the unit sequence every condition's stretch is chosen in
 AMPLITUDE_MODES = ("sqrt", "power")
 SELECTIONS = ("stationary", "middle")
-MODELS = ("sines", "sines+residual")  # the method's sinusoids; plus the stochastic residual
-RECOMMENDED_MODEL = "sines+residual"
-"""The model the command line builds with unless told otherwise: on HaTT paper textures its
-felt spectrum is 2.3× closer to the real vibration than the method's sines in the
-sensitivity-weighted log-spectral distance (median 3.30 against 7.64 dB; 1/3-octave band
-levels about equal, 6.59 against 6.46 dB; ``benchmarks/bench_fidelity.py``).
-:class:`TactileParams` itself defaults to ``"sines"``, the method, and the study's conditions
-A–F always use it."""
+MODELS = TACTILE_MODELS  # the method's sinusoids; plus the stochastic residual
 _COUNTS = ("top", "subpatterns", "unit_ms")
 _MAXIMA = {"top": MAX_TOP, "subpatterns": MAX_SUBPATTERNS, "unit_ms": MAX_UNIT_MS}
 
@@ -84,7 +86,7 @@ class TactileParams:
 
     Raises:
         ParameterError: any bad value, named by its parameter. Values that size the pattern or
-            its analysis are checked against their limits (:mod:`realpen.dsp.limits`: ``top``,
+            its analysis are checked against their limits (:mod:`realpen.checks`: ``top``,
             ``subpatterns``, ``unit_ms``, ``seed``, ``cap_db``; ``rate`` and the loop's length
             in samples, :mod:`realpen.tactile.synthesis`; ``analysis_rate``,
             :mod:`realpen.io.limits`) before anything is computed.
@@ -154,7 +156,7 @@ class TactileParams:
             raise ParameterError("selection_unit_ms", f"unit_ms ({self.unit_ms:g}) must be a whole "
                                                       f"multiple of it, got "
                                                       f"{self.selection_unit_ms:g}")
-        object.__setattr__(self, "rate", check_rate(self.rate))
+        object.__setattr__(self, "rate", check_pattern_rate(self.rate))
         if subpattern_samples(self.rate, self.unit_ms) < 1:
             # Said here: the crossfade, checked next against the unit, is not what is wrong.
             raise ParameterError("unit_ms", f"{self.unit_ms:g} ms is less than one sample at "

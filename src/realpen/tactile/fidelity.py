@@ -29,7 +29,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from realpen.errors import ParameterError, require_number
+from realpen.checks import require_number
+from realpen.errors import ParameterError
 from realpen.tactile.actuator import Actuator, as_actuator
 
 __all__ = ["BAND_HZ", "THIRD_OCTAVE_CENTRES_HZ", "SENSITIVITY_SOURCE", "threshold_db",

@@ -41,9 +41,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from realpen.checks import (
+    MAX_FORCE_N,
+    MAX_GRID_POINTS,
+    MAX_PATTERN_FRAMES,
+    MAX_SPEED_MM_S,
+    check_magnitude,
+    is_number,
+)
 from realpen.errors import ParameterError, RealPenError, fail
 from realpen.tactile.pattern import TactilePattern, content_version
-from realpen.tactile.synthesis import MAX_PATTERN_FRAMES
 
 if TYPE_CHECKING:
     from realpen.datasets.hatt import HattModelSet
@@ -52,29 +59,16 @@ if TYPE_CHECKING:
     from realpen.tactile.conditions import TactileParams
 
 __all__ = ["GridPoint", "VibrationGrid", "grid_from_recordings", "grid_from_hatt",
-           "central_point", "MAX_GRID_POINTS", "FULL_PRESSURE_FORCE_N", "MAX_FORCE_N",
-           "MAX_SPEED_MM_S", "HATT_SECONDS"]
+           "central_point", "FULL_PRESSURE_FORCE_N", "HATT_SECONDS"]
 
-MAX_GRID_POINTS = 64
-"""The most points a grid holds (a HaTT texture has at most 41 vertices)."""
 FULL_PRESSURE_FORCE_N = 4.0
 """Default force in N at page pressure 1: a firm press with a pen (HaTT records 0–8 N)."""
-MAX_SPEED_MM_S = 10_000.0  # 10 m/s: no hand moves a pen faster
-MAX_FORCE_N = 1_000.0  # 100 kgf: no pen is pressed harder
 _SAME = 1e-12  # scaled distance under which a query is at a grid point
 _APART = 1e-9  # scaled distance two grid points must keep (else they cannot be told apart)
 _LINE = 1e-9  # smaller-to-larger singular value ratio of the scaled points: on one line
 _TINY = 1e-12  # weights below this are rounding (clipped to 0, the rest renormalised)
 
 
-def _number(name: str, value: Any, maximum: float) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer,
-                                                                     np.floating)):
-        raise ParameterError(name, f"must be a number, got {type(value).__name__}")
-    value = float(value)
-    if not math.isfinite(value) or not 0.0 <= value <= maximum:
-        raise ParameterError(name, f"must be a finite number from 0 to {maximum:g}, got {value:g}")
-    return value
 
 
 @dataclass(frozen=True, repr=False)
@@ -92,9 +86,9 @@ class GridPoint:
     pattern: TactilePattern
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "speed_mm_s", _number("speed_mm_s", self.speed_mm_s,
+        object.__setattr__(self, "speed_mm_s", check_magnitude("speed_mm_s", self.speed_mm_s,
                                                        MAX_SPEED_MM_S))
-        object.__setattr__(self, "force_n", _number("force_n", self.force_n, MAX_FORCE_N))
+        object.__setattr__(self, "force_n", check_magnitude("force_n", self.force_n, MAX_FORCE_N))
         if not isinstance(self.pattern, TactilePattern):
             raise ParameterError("pattern", f"must be a TactilePattern, got "
                                             f"{type(self.pattern).__name__}")
@@ -197,7 +191,7 @@ class VibrationGrid:
                                                f"sub-pattern; a grid's patterns are at most full "
                                                f"scale (1)")
         set_(self, "points", points)
-        value = _number("full_pressure_force_n", self.full_pressure_force_n, MAX_FORCE_N)
+        value = check_magnitude("full_pressure_force_n", self.full_pressure_force_n, MAX_FORCE_N)
         if value <= 0:
             raise ParameterError("full_pressure_force_n", "must be > 0, got 0")
         set_(self, "full_pressure_force_n", value)
@@ -517,9 +511,7 @@ def _check_point(index: int, speed_mm_s: object, force_n: object) -> tuple[float
     values = []
     for name, value, limit in (("speed_mm_s", speed_mm_s, MAX_SPEED_MM_S),
                                ("force_n", force_n, MAX_FORCE_N)):
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
-                                                             np.floating)) \
-                or not math.isfinite(value) or not 0 <= value <= limit:
+        if not is_number(value) or not math.isfinite(value) or not 0 <= value <= limit:
             raise ParameterError("points", f"point {index}: {name} must be a finite number from "
                                            f"0 to {limit:g}, got {value!r}")
         values.append(float(value))
@@ -559,7 +551,7 @@ def grid_from_recordings(points: Sequence[tuple[float, float, Recording]],
         The grid; its ``provenance["sources"]`` lists the recordings, in point order.
 
     Raises:
-        ParameterError: no points or more than :data:`~realpen.tactile.grid.MAX_GRID_POINTS`,
+        ParameterError: no points or more than :data:`~realpen.checks.MAX_GRID_POINTS`,
             a bad speed, force, ``reference`` or ``full_pressure_force_n`` (all checked
             before any pattern is built).
         RealPenError: a problem with a recording, naming it.
@@ -608,7 +600,7 @@ def _params(params: TactileParams | None, options: dict) -> TactileParams:
 
 def _check_grid_options(reference: int | None, count: int, full_pressure_force_n: float) -> None:
     """What the grid will refuse, refused before any pattern is built."""
-    if _number("full_pressure_force_n", full_pressure_force_n, MAX_FORCE_N) <= 0:
+    if check_magnitude("full_pressure_force_n", full_pressure_force_n, MAX_FORCE_N) <= 0:
         raise ParameterError("full_pressure_force_n", "must be > 0, got 0")
     if reference is not None and (isinstance(reference, bool)
                                   or not isinstance(reference, (int, np.integer))

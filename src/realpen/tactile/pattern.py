@@ -35,20 +35,22 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from realpen.dsp.limits import MAX_COMPONENTS, MAX_SUBPATTERNS, MAX_TOP, MAX_UNIT_MS
-from realpen.errors import ParameterError, require_choice, require_number
-from realpen.io.limits import MAX_RATE_HZ
+from realpen.checks import (
+    MAX_COMPONENTS,
+    MAX_RATE_HZ,
+    MAX_SUBPATTERNS,
+    MAX_TOP,
+    MAX_UNIT_MS,
+    check_frames,
+    check_pattern_rate,
+    require_choice,
+    require_number,
+)
+from realpen.errors import ParameterError
 from realpen.tactile.actuator import Actuator
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.residual import Residual, render_residual
-from realpen.tactile.synthesis import (
-    BOUNDARIES,
-    MAX_RATE,
-    check_frames,
-    check_rate,
-    subpattern_samples,
-    synthesize,
-)
+from realpen.tactile.synthesis import BOUNDARIES, subpattern_samples, synthesize
 
 if TYPE_CHECKING:
     from realpen.dsp.spectrum import Analysis
@@ -216,9 +218,9 @@ class TactilePattern:
     comes last so that positional calls written before it existed keep their meaning.
 
     Limits (a :class:`~realpen.errors.ParameterError` otherwise, before anything is
-    synthesised): at most :data:`~realpen.dsp.limits.MAX_SUBPATTERNS` sub-patterns of at most
-    :data:`~realpen.dsp.limits.MAX_TOP` components, each at most :data:`MAX_SUBPATTERN_MS` ms,
-    and a loop of at most :data:`~realpen.tactile.synthesis.MAX_PATTERN_FRAMES` samples.
+    synthesised): at most :data:`~realpen.checks.MAX_SUBPATTERNS` sub-patterns of at most
+    :data:`~realpen.checks.MAX_TOP` components, each at most :data:`MAX_SUBPATTERN_MS` ms,
+    and a loop of at most :data:`~realpen.checks.MAX_PATTERN_FRAMES` samples.
 
     Example:
         >>> pattern = TactilePattern([[Component(175.0, 0.5)], [Component(180.0, 0.4)]])
@@ -264,7 +266,7 @@ class TactilePattern:
             raise ParameterError("subpatterns", f"the pattern has {total:,} components in all; "
                                                 f"the limit is {MAX_COMPONENTS:,}")
         set_(self, "subpatterns", tuple(subpatterns))
-        set_(self, "rate", check_rate(self.rate))
+        set_(self, "rate", check_pattern_rate(self.rate))
         set_(self, "subpattern_ms", _finite("subpattern_ms", self.subpattern_ms, 0.0, False))
         require_number("subpattern_ms", self.subpattern_ms, maximum=MAX_SUBPATTERN_MS)
         require_choice("boundary", self.boundary, BOUNDARIES)
@@ -380,7 +382,7 @@ class TactilePattern:
                 frequency (the components would alias).
         """
         rate = self.rate if rate is None else rate
-        require_number("rate", rate, minimum=0.0, inclusive=False, maximum=MAX_RATE)
+        require_number("rate", rate, minimum=0.0, inclusive=False, maximum=MAX_RATE_HZ)
         if self.max_frequency_hz >= rate / 2:
             raise ParameterError("rate", f"{rate:g} Hz is too low for components up to "
                                          f"{self.max_frequency_hz:.0f} Hz (needs more than "
@@ -457,7 +459,7 @@ class TactilePattern:
     def report(self) -> dict:
         """The JSON report of ``realpen tactile``: the pattern, its parameters, actuator,
         source and analysis, and notes."""
-        from realpen import __version__
+        from realpen._version import __version__
 
         analysis = None
         if self.analysis is not None:

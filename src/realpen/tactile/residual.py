@@ -63,14 +63,22 @@ from typing import Any
 
 import numpy as np
 
-from realpen.dsp.limits import MAX_SEED, MAX_SUBPATTERNS
-from realpen.errors import ParameterError, require_number
-from realpen.io.limits import MAX_RATE_HZ
-from realpen.tactile.synthesis import check_frames, fade_samples, subpattern_samples
+from realpen.checks import (
+    MAX_BANDS,
+    MAX_LEVELS,
+    MAX_RATE_HZ,
+    MAX_SEED,
+    MAX_SUBPATTERNS,
+    check_frames,
+    check_number_list,
+    require_number,
+)
+from realpen.errors import ParameterError
+from realpen.tactile.synthesis import fade_samples, subpattern_samples
 
 __all__ = ["Residual", "residual_envelope", "residual_bands", "render_residual",
            "residual_fade_samples", "band_psd_at", "LOBE_BINS", "BANDS_PER_OCTAVE",
-           "MIN_FADE_MS", "MAX_BANDS", "MAX_LEVELS"]
+           "MIN_FADE_MS"]
 
 LOBE_BINS = 2.0
 """Half-width (bins of the unpadded Hann window, ``rate / N`` Hz) of the main lobe taken out
@@ -79,30 +87,12 @@ BANDS_PER_OCTAVE = 12
 MIN_FADE_MS = 5.0
 """The shortest crossfade of the residual between sub-patterns and at the wrap (ms), whatever
 the pattern's boundary: the sines' default crossfade."""
-MAX_BANDS = 256
-"""The most bands of a residual (twelfth-octave bands from 30 Hz to 192 kHz are 152)."""
-MAX_LEVELS = 65_536
-"""The most levels (sub-patterns × bands) of a residual, so a profile's JSON stays within
-:data:`realpen.io.limits.MAX_JSON_VALUES` beside the most components a pattern may have
-(:data:`realpen.dsp.limits.MAX_COMPONENTS`); the method's pattern has 15 × 38."""
 _TINY = 1e-300
 
 
-def _sequence(name: str, value: Any) -> list:
-    if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__"):
-        raise ParameterError(name, f"must be a list of numbers, got {type(value).__name__}")
-    return list(value)
-
-
 def _numbers(name: str, value: Any, maximum: int) -> np.ndarray:
-    items = _sequence(name, value)
-    if len(items) > maximum:
-        raise ParameterError(name, f"holds {len(items):,} values; at most {maximum:,}")
-    for item in items:
-        if isinstance(item, (bool, np.bool_)) or not isinstance(item, (int, float, np.integer,
-                                                                       np.floating)):
-            raise ParameterError(name, f"must hold numbers only, got {type(item).__name__}")
-    array = np.asarray(items, dtype=np.float64)
+    """``value`` as a float64 array: a list of at most ``maximum`` finite numbers."""
+    array = np.asarray(check_number_list(name, value, maximum), dtype=np.float64)
     if not np.all(np.isfinite(array)):
         raise ParameterError(name, "must hold finite numbers only")
     return array
@@ -114,12 +104,12 @@ class Residual:
 
     Attributes:
         band_edges_hz: the B + 1 band edges in Hz, strictly ascending, > 0 (at most
-            :data:`MAX_BANDS` bands, the top edge at most half of
-            :data:`realpen.io.limits.MAX_RATE_HZ`).
+            :data:`~realpen.checks.MAX_BANDS` bands, the top edge at most half of
+            :data:`realpen.checks.MAX_RATE_HZ`).
         levels: per sub-pattern, B amplitude spectral densities of the residual in the *output*
             pattern, full scale per √Hz (≥ 0; already equalised for the actuator and scaled by
             the pattern's normalisation gain). A band's power is ``level² × width``.
-        seed: seed of the noise's random phases (0 … :data:`realpen.dsp.limits.MAX_SEED`).
+        seed: seed of the noise's random phases (0 … :data:`realpen.checks.MAX_SEED`).
 
     Raises:
         ParameterError: a bad value, named by its field (lists, tuples and arrays are accepted
@@ -143,7 +133,7 @@ class Residual:
         if edges[-1] > MAX_RATE_HZ / 2:
             raise ParameterError("band_edges_hz", f"must be <= {MAX_RATE_HZ / 2:g} Hz (half the "
                                                   f"highest rate), got {edges[-1]:g}")
-        rows = _sequence("levels", self.levels)
+        rows = check_number_list("levels", self.levels)
         if not rows:
             raise ParameterError("levels", "needs the levels of at least one sub-pattern")
         if len(rows) > MAX_SUBPATTERNS:
@@ -441,7 +431,7 @@ def render_residual(residual: Residual, rate: float, subpattern_ms: float,
 
     Raises:
         ParameterError: a bad ``rate``, ``subpattern_ms`` or ``crossfade_ms``, a loop longer
-            than :data:`~realpen.tactile.synthesis.MAX_PATTERN_FRAMES`, or a ``subpatterns``
+            than :data:`~realpen.checks.MAX_PATTERN_FRAMES`, or a ``subpatterns``
             count that is not the residual's.
 
     Example:

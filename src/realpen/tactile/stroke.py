@@ -7,7 +7,7 @@ offline:
 - the tactile loop is gated as the page gates it: its gain is the Eq. 1 gain of the coupling
   over ``a_max`` (full drive at ``a_max``), smoothed by the coupling's one-pole, so it plays
   while the pen moves on the surface and falls silent when it is lifted or stops
-  (:func:`realpen.sound.stroke.control_signals`, the same speed meter and pen-down rule);
+  (:func:`realpen.motion.control.control_signals`, the same speed meter and pen-down rule);
 - with several points, every point's loop plays, all started together at the stroke's first
   event, point i's through a gain that follows ``sqrt(w_i)`` at the pen's speed and force
   (force = pressure × ``full_pressure_force_n``), smoothed by the same one-pole. As on the page,
@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from realpen.errors import ParameterError, require_number
-from realpen.sound.coupling import Coupling
-from realpen.sound.stroke import MAX_RENDER_FRAMES, Trajectory, control_signals, render_frames
+from realpen.checks import MAX_RATE_HZ, MAX_RENDER_FRAMES, require_number
+from realpen.errors import ParameterError
+from realpen.motion.control import control_signals, render_frames
+from realpen.motion.coupling import Coupling
+from realpen.motion.trajectory import Trajectory
 from realpen.tactile.grid import VibrationGrid
 from realpen.tactile.pattern import TactilePattern
-from realpen.tactile.synthesis import MAX_RATE
 
 __all__ = ["render_tactile_stroke", "point_targets"]
 
@@ -76,12 +77,12 @@ def render_tactile_stroke(grid_or_pattern: VibrationGrid | TactilePattern, traje
             :attr:`realpen.profile.bundle.PenProfile.grid`) or one
             :class:`~realpen.tactile.pattern.TactilePattern`.
         trajectory: the stroke (``t`` s, ``x``/``y`` mm, ``pressure`` 0–1), e.g. from
-            :func:`realpen.sound.stroke.load_trajectory`.
+            :func:`realpen.motion.trajectory.load_trajectory`.
         rate: output rate in Hz (default: the patterns' own rate). Loops are rendered at it;
             at the patterns' own rate their :attr:`~TactilePattern.samples` are used (a
             profile's ``tactile.wav`` for its reference pattern).
         coupling: the Eq. 1 constants and smoother (default
-            :class:`~realpen.sound.coupling.Coupling()`; a profile's is ``profile.coupling``).
+            ``Coupling()``, :class:`~realpen.motion.coupling.Coupling`; a profile's is ``profile.coupling``).
 
     Returns:
         float64 array at ``rate`` Hz covering the stroke plus five smoothing time constants
@@ -89,12 +90,12 @@ def render_tactile_stroke(grid_or_pattern: VibrationGrid | TactilePattern, traje
 
     Raises:
         ParameterError: a bad ``rate`` (not positive, too low for the components, or a render
-            of more than :data:`~realpen.sound.stroke.MAX_RENDER_FRAMES` samples, or loops
+            of more than :data:`~realpen.checks.MAX_RENDER_FRAMES` samples, or loops
             of more than that in all).
 
     Example:
         >>> from realpen.tactile.pattern import Component
-        >>> from realpen.sound.stroke import Trajectory
+        >>> from realpen.motion.trajectory import Trajectory
         >>> stroke = Trajectory.checked([0, 0.5, 1.0], [0, 25, 50], [0, 0, 0], [0.5] * 3)
         >>> pattern = TactilePattern([[Component(175.0, 0.5)]])
         >>> render_tactile_stroke(pattern, stroke).shape
@@ -108,7 +109,7 @@ def render_tactile_stroke(grid_or_pattern: VibrationGrid | TactilePattern, traje
     rate = grid.rate if rate is None else rate
     if isinstance(rate, (np.integer, np.floating)):
         rate = rate.item()
-    require_number("rate", rate, minimum=0.0, inclusive=False, maximum=MAX_RATE)
+    require_number("rate", rate, minimum=0.0, inclusive=False, maximum=MAX_RATE_HZ)
     frames = render_frames(trajectory, coupling, rate)
     loop_frames = grid.points[0].pattern.frames_at(rate)
     if frames > MAX_RENDER_FRAMES or loop_frames * len(grid.points) > MAX_RENDER_FRAMES:

@@ -22,51 +22,18 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from realpen.errors import ParameterError, require_choice, require_number
-from realpen.io.limits import MAX_RATE_HZ, MIN_RATE_HZ
+from realpen.checks import check_frames, require_choice, require_number
+from realpen.errors import ParameterError
 
-__all__ = ["BOUNDARIES", "MIN_RATE", "MAX_RATE", "MAX_PATTERN_FRAMES", "check_rate",
-           "check_frames", "synthesize", "subpattern_samples", "fade_samples",
+__all__ = ["BOUNDARIES", "synthesize", "subpattern_samples", "fade_samples",
            "component_arrays"]
 
 BOUNDARIES = ("crossfade", "hard")
-MIN_RATE = MIN_RATE_HZ  # Hz; the lowest rate of any signal RealPen writes
-MAX_RATE = MAX_RATE_HZ  # Hz; the highest common audio rate (a pattern is synthesised whole)
-MAX_PATTERN_FRAMES = 2**24
-"""The most samples in one loop of a tactile pattern (16 777 216: 35 min at 8 kHz, 44 s at
-384 kHz; 128 MiB as float64). The method's loop is 1.5 s, 12 000 samples at 8 kHz."""
 _BLOCK_VALUES = 2**22  # sinusoid values computed at once: 32 MiB, however many components
 
 
-def check_rate(rate: float) -> int:
-    """``rate`` as a whole number of Hz, from :data:`MIN_RATE` to :data:`MAX_RATE`.
-
-    Raises:
-        ParameterError: (parameter ``rate``) otherwise.
-    """
-    require_number("rate", rate, minimum=MIN_RATE, maximum=MAX_RATE)
-    if int(rate) != rate:
-        raise ParameterError("rate", f"must be a whole number of Hz, got {rate:g}")
-    return int(rate)
 
 
-def check_frames(count: int, rate: float, subpattern_ms: float, parameter: str = "rate") -> int:
-    """Samples in a loop of ``count`` sub-patterns of ``subpattern_ms`` ms at ``rate`` Hz,
-    checked against :data:`MAX_PATTERN_FRAMES` before anything is synthesised.
-
-    Args:
-        parameter: the parameter to name when the loop is too long.
-
-    Raises:
-        ParameterError: (named ``parameter``) a loop longer than :data:`MAX_PATTERN_FRAMES`.
-    """
-    frames = subpattern_samples(rate, subpattern_ms) * count
-    if frames > MAX_PATTERN_FRAMES:
-        raise ParameterError(parameter, f"{count} sub-pattern(s) of {subpattern_ms:g} ms at "
-                                        f"{rate:g} Hz make a loop of {frames:,} samples; a "
-                                        f"pattern holds at most {MAX_PATTERN_FRAMES:,} (fewer "
-                                        f"or shorter sub-patterns, or a lower rate)")
-    return frames
 
 
 def subpattern_samples(rate: float, subpattern_ms: float) -> int:
@@ -124,7 +91,7 @@ def synthesize(subpatterns: Sequence, rate: int, subpattern_ms: float,
 
     Raises:
         ParameterError: a bad ``rate``, ``subpattern_ms``, ``boundary`` or ``crossfade_ms``, no
-            sub-patterns, or a loop longer than :data:`MAX_PATTERN_FRAMES` samples (parameter
+            sub-patterns, or a loop longer than :data:`~realpen.checks.MAX_PATTERN_FRAMES` samples (parameter
             ``rate``).
 
     Example:
