@@ -1,11 +1,27 @@
 #!/usr/bin/env bash
-# Set up a virtual environment with RealPen and its test dependencies, lint, then run every test.
-# Usage: bash scripts/test.sh [pytest arguments]
+# Set up a virtual environment with RealPen and its test dependencies, lint, then run the tests.
+# Usage: bash scripts/test.sh [--fast] [pytest arguments]
+#
+# Tiers (pytest markers, registered in pyproject.toml and applied in tests/conftest.py and the
+# test modules):
+#   browser   Debian's Chromium driven by Playwright (the live page, the study pages, Web Serial)
+#   postgres  a PostgreSQL server of the run's own (the store on PostgreSQL)
+#   firmware  the pen firmware under the MicroPython Unix port, the Due's C core built with cc
+#   slow      a `realpen serve` or Python subprocess, or seconds of computing
+# Without --fast every test runs (about 5 minutes on 2 cores). With --fast only the tests that
+# carry none of the four run: the library and the CLI in-process (about a minute).
+# Other arguments go to pytest, e.g. `bash scripts/test.sh --fast -k stats` or
+# `bash scripts/test.sh -m browser`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+tier=()
+if [ "${1:-}" = "--fast" ]; then
+    shift
+    tier=(-m "not browser and not postgres and not firmware and not slow")
+fi
 python3 -m venv .venv
 .venv/bin/python -m pip install --quiet --upgrade pip
-.venv/bin/python -m pip install --quiet -e '.[test]'
+.venv/bin/python -m pip install --quiet -e '.[test,docs]'
 # The browser tests drive Debian's Chromium, the store tests start a PostgreSQL server of
 # their own (initdb in a temporary folder), and the Arduino Due firmware's C core is compiled
 # with cc: install what is missing when we may, with one apt-get update for all.
@@ -28,8 +44,39 @@ if [ "${#missing[@]}" -gt 0 ]; then
              "postgresql: the store tests on PostgreSQL; gcc: the Due firmware tests)." >&2
     fi
 fi
-# Lint first: the rules are in pyproject.toml ([tool.ruff]); any finding stops the run.
+# Lint first: the rules are in pyproject.toml ([tool.ruff], [tool.importlinter]); any finding
+# stops the run.
 .venv/bin/ruff check --no-cache .
+.venv/bin/lint-imports --no-cache >/dev/null || .venv/bin/lint-imports --no-cache
+# The page's JavaScript (ESLint, tsc) and, in the full run, the documentation site (mkdocs
+# --strict) are checked beside the tests: the tests mostly wait for browsers and servers, so the
+# two cores have room. Each writes to a log that is shown only when it fails.
+checks_dir="$(mktemp -d)"
+trap 'rm -rf "$checks_dir"' EXIT
+js_pid=
+if command -v npm >/dev/null 2>&1; then
+    bash scripts/lint-js.sh >"$checks_dir/js.log" 2>&1 &
+    js_pid=$!
+else
+    echo "note: npm not found: the JavaScript lint (ESLint, tsc) is skipped" >&2
+fi
+docs_pid=
+if [ "${#tier[@]}" -eq 0 ]; then
+    bash scripts/build-docs.sh "$checks_dir/site" >"$checks_dir/docs.log" 2>&1 &
+    docs_pid=$!
+fi
 # Two workers (pytest-xdist): the browser and server tests mostly wait, so two cores finish the
-# suite in about two thirds of the time one takes.
-exec .venv/bin/python -m pytest -n 2 "$@"
+# suite in about two thirds of the time one takes. --dist loadfile runs each module on one
+# worker, so its module-scoped set-up (servers, analyses, renders) is built once; the modules
+# are handed out longest first (the order tests/conftest.py gives them; see
+# pytest_collection_modifyitems there).
+status=0
+.venv/bin/python -m pytest -n 2 --dist loadfile --no-loadscope-reorder "${tier[@]}" "$@" || status=$?
+if [ -n "$js_pid" ] && ! wait "$js_pid"; then
+    echo "JavaScript lint failed (bash scripts/lint-js.sh):" >&2; cat "$checks_dir/js.log" >&2; status=1
+fi
+if [ -n "$docs_pid" ] && ! wait "$docs_pid"; then
+    echo "documentation build failed (bash scripts/build-docs.sh):" >&2; cat "$checks_dir/docs.log" >&2
+    status=1
+fi
+exit "$status"

@@ -1,4 +1,14 @@
-"""Shared fixtures: the real-data folders beside the repository and a CLI runner."""
+"""Shared fixtures: the real-data folders beside the repository, a CLI runner, the live app,
+PostgreSQL and Chromium; and the test tiers.
+
+Tiers (markers, registered in pyproject.toml; ``scripts/test.sh --fast`` leaves out all four):
+``browser`` (Chromium through Playwright: every test that uses the :func:`chromium` fixture),
+``postgres`` (every test that uses :func:`postgres_server`, and :func:`store_target`'s
+PostgreSQL case), ``firmware`` (the pen firmware under the MicroPython Unix port, or the Due's
+C core compiled with cc: marked in the test modules) and ``slow`` (a ``realpen serve`` or Python
+subprocess, or seconds of computing: marked in the test modules). The first two follow from the
+fixtures here (:func:`pytest_collection_modifyitems`), so a new test cannot forget them.
+"""
 
 from __future__ import annotations
 
@@ -175,7 +185,7 @@ def postgres_server():
         server.__exit__(None, None, None)
 
 
-@pytest.fixture(params=["sqlite", "postgresql"])
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
 def store_target(request, tmp_path):
     """A fresh store target: an SQLite file path, or the URL of a new PostgreSQL database."""
     if request.param == "sqlite":
@@ -199,3 +209,116 @@ def store_rows(target, sql: str) -> list[tuple]:
             return [tuple(row) for row in connection.exec_driver_sql(sql)]
     finally:
         engine.dispose()
+
+
+# ---- Chromium, one per worker (tests/test_live_browser.py and the other browser tests) -------
+
+class _ChromiumPool:
+    """Playwright and the Chromium browsers launched through it, one per set of arguments,
+    shared by every browser test of a worker (each test opens contexts and pages of its own).
+
+    Playwright's sync API marks the worker's thread as running its event loop for as long as it
+    is started, which would break a later test's ``asyncio.run``; the pool is therefore stopped
+    after the last of a run of consecutive browser tests (:func:`pytest_runtest_teardown`).
+    Under xdist the browser modules are handed out first (:func:`pytest_collection_modifyitems`),
+    so each worker runs its share of them in a row, on one Chromium.
+    """
+
+    def __init__(self):
+        self._playwright = None
+        self._browsers: dict[tuple[str, ...], object] = {}
+
+    @property
+    def started(self) -> bool:
+        return self._playwright is not None
+
+    def launch(self, args=None):
+        """The worker's Chromium started with ``args`` (default ``live_support.CHROMIUM_ARGS``),
+        launched on first use."""
+        from live_support import CHROMIUM, CHROMIUM_ARGS
+
+        key = tuple(CHROMIUM_ARGS if args is None else args)
+        if key not in self._browsers:
+            if self._playwright is None:
+                from playwright.sync_api import sync_playwright
+
+                self._playwright = sync_playwright().start()
+            self._browsers[key] = self._playwright.chromium.launch(
+                executable_path=str(CHROMIUM), args=list(key))
+        return self._browsers[key]
+
+    def stop(self) -> None:
+        """Close every browser and stop Playwright (the next :meth:`launch` starts them again)."""
+        try:
+            for browser in self._browsers.values():
+                with contextlib.suppress(Exception):  # already gone with a crashed driver
+                    browser.close()
+        finally:
+            self._browsers.clear()
+            playwright, self._playwright = self._playwright, None
+            if playwright is not None:
+                playwright.stop()
+
+
+_CHROMIUM = _ChromiumPool()
+
+
+@pytest.fixture(scope="session")
+def chromium():
+    """``chromium(args=None)``: the worker's Debian Chromium under Playwright, launched with
+    ``args`` (default ``live_support.CHROMIUM_ARGS``) the first time and shared after; tests
+    open their own contexts and pages. Call it in each test (or a function-scoped fixture), not
+    once per module: the pool closes between runs of browser tests. It is the only way a test
+    may start Chromium: a second Playwright in the worker would refuse to start while this one
+    runs. Marks the tests of its module ``browser``."""
+    yield _CHROMIUM.launch
+    _CHROMIUM.stop()
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item, nextitem):
+    """Stop the shared Chromium once the next test is not a browser test (see
+    :class:`_ChromiumPool`), after the test's own fixtures are finalized."""
+    result = yield
+    if _CHROMIUM.started and (nextitem is None or nextitem.get_closest_marker("browser") is None):
+        _CHROMIUM.stop()
+    return result
+
+
+# ---- tiers, and the order in which pytest-xdist hands out the modules -------------------------
+
+def _weight(items) -> int:
+    """0 for a module with browser tests, 1 for one with other marked (long) tests, else 2."""
+    if any(item.get_closest_marker("browser") for item in items):
+        return 0
+    if any(item.get_closest_marker(mark) for item in items
+           for mark in ("postgres", "firmware", "slow")):
+        return 1
+    return 2
+
+
+@pytest.hookimpl(tryfirst=True)  # before -m deselects: the tiers must be known
+def pytest_collection_modifyitems(config, items):
+    """Mark the tiers that follow from the fixtures; under xdist, order the modules longest
+    first.
+
+    ``scripts/test.sh`` runs ``--dist loadfile --no-loadscope-reorder``: a module's tests run on
+    one worker (its module-scoped servers and analyses are built once) and the modules are
+    handed out in collection order, so the modules that take longest start first and the many
+    short ones fill the end evenly; consecutive browser modules share a worker's Chromium.
+    """
+    modules: dict[str, list] = {}
+    for item in items:
+        modules.setdefault(item.nodeid.split("::")[0], []).append(item)
+    # A module that drives Chromium is a browser module as a whole: its other tests share its
+    # module-scoped servers, so they run with it (and are skipped with it without Chromium).
+    for module_items in modules.values():
+        browser = any("chromium" in getattr(item, "fixturenames", ()) for item in module_items)
+        for item in module_items:
+            if browser:
+                item.add_marker(pytest.mark.browser)
+            if "postgres_server" in getattr(item, "fixturenames", ()):
+                item.add_marker(pytest.mark.postgres)
+    if hasattr(config, "workerinput"):  # an xdist worker: every worker sorts alike
+        ordered = sorted(modules.values(), key=_weight)  # stable: same order within a weight
+        items[:] = [item for module_items in ordered for item in module_items]

@@ -97,6 +97,7 @@ print(json.dumps(state))
 """
 
 
+@pytest.mark.slow
 def test_imports_stay_light_and_display_changes_no_global_state():
     """One fresh interpreter, step by step: what each import pulls in, and matplotlib's state.
 
@@ -223,6 +224,7 @@ def test_export_a_pattern_made_in_python(pattern, tmp_path):
     assert Path(getattr(written, "path", tmp_path / "b.ahap")).exists()
 
 
+@pytest.mark.slow
 def test_quickstart_script_runs(tmp_path):
     with mock.patch.object(sys, "argv", [str(QUICKSTART), str(tmp_path)]):
         runpy.run_path(str(QUICKSTART), run_name="__main__")

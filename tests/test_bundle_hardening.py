@@ -449,6 +449,7 @@ def leaves(node, prefix=()):
 JUNK = ["x", -1, 0, 10**60, -1e308, None, [], {"a": [None]}, True]
 
 
+@pytest.mark.slow
 def test_junk_anywhere_in_profile_json_gives_only_realpen_errors(pencil, tmp_path):
     """Every value of profile.json in turn replaced by junk of each kind: the bundle is refused
     in one line, or it loads and everything the CLI and the server do with it works."""
@@ -592,6 +593,7 @@ def limited(command: list[str], home: Path) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
+@pytest.mark.slow
 def test_zip_bombs_are_refused_within_bounded_memory(pencil, tmp_path):
     """A 2 GiB tactile.wav and a 1 GiB profile.json, each a bundle of about 2 MB, under a 2 GiB
     address-space limit: refused by name; the other pens are listed."""
@@ -622,6 +624,7 @@ def test_zip_bombs_are_refused_within_bounded_memory(pencil, tmp_path):
     assert_clean_failure(shown, f"{bombs[0]}: tactile.wav is declared")
 
 
+@pytest.mark.slow
 def test_serve_with_bad_bundles_starts_warns_once_and_offers_the_others(pencil, tmp_path):
     import httpx
 

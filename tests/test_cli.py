@@ -56,12 +56,14 @@ def test_dash_h_is_help_everywhere(path):
     assert "Usage: realpen" in short.stdout and short.stdout == long.stdout
 
 
+@pytest.mark.slow
 def test_python_dash_m_realpen_prints_usage():
     done = run_cli_process("--help")
     assert done.returncode == 0, done.stderr
     assert "Usage: realpen" in done.stdout and "hatt" in done.stdout and "--version" in done.stdout
 
 
+@pytest.mark.slow
 def test_the_help_reads_the_library_constants_without_numpy():
     """The commands' defaults come from the library's numpy-free modules (realpen.defaults,
     realpen.checks), not from copies; importing the command modules loads no numpy."""

@@ -191,9 +191,14 @@ def _burst_upload(pen: VirtualPen) -> tuple[list, int]:
             received = bytearray()
             await client.start_notify(protocol.BLE_TX, lambda _c, piece: received.extend(piece))
             with pen.hold_main_loop():
+                before = sum(pen.rx_pieces)
                 for frame in frames:  # one frame a write: each fits the 244-byte MTU
                     await client.write_gatt_char(protocol.BLE_RX, frame, response=False)
-                await asyncio.sleep(0.02)  # every write has reached the pen's RX buffer
+                # Every write has reached the pen's RX buffer (kept or cut): waited for, not
+                # slept for, as a loaded machine delivers write commands late.
+                deadline = time.monotonic() + 10
+                while sum(pen.rx_pieces) - before < len(stream) and time.monotonic() < deadline:
+                    await asyncio.sleep(0.002)
             for _ in range(60):  # the COMMIT's reply comes within milliseconds, if at all
                 replies = protocol.FrameDecoder().feed(bytes(received))
                 if any(seq == 3 for _, seq, _ in replies):

@@ -42,6 +42,7 @@ def states(trace) -> list[tuple[int, int, int]]:
     return [(e["playing"], e["gain"], e["rate"]) for e in events if e["event"] == "set_state"]
 
 
+@pytest.mark.firmware
 def test_info_with_the_port_before_or_after_the_subcommand(sim, monkeypatch):
     first = run_cli("device", "--port", sim.port, "info")
     assert first.returncode == 0, first.stderr
@@ -56,6 +57,7 @@ def test_info_with_the_port_before_or_after_the_subcommand(sim, monkeypatch):
     assert run_cli("device", "info").returncode == 0
 
 
+@pytest.mark.firmware
 def test_upload_play_stop(sim):
     done = run_cli("device", "upload", "pencil", "--port", sim.port)
     assert done.returncode == 0, done.stderr
@@ -75,6 +77,7 @@ def test_upload_play_stop(sim):
                                                (0, 0, p.RATE_ONE)]
 
 
+@pytest.mark.firmware
 def test_ping_and_monitor(sim):
     pinged = run_cli("device", "ping", "--count", "3", "--port", sim.port)
     assert pinged.returncode == 0, pinged.stderr
@@ -94,6 +97,7 @@ def test_ping_and_monitor(sim):
     assert 1.2 <= float(summary[1]) + 0.05 and float(summary[1]) < 3, watched.stdout
 
 
+@pytest.mark.firmware
 def test_a_half_frame_left_in_the_pen_does_not_eat_the_hello(sim):
     # An interrupted command (Ctrl-C in an upload) leaves the start of a frame in the pen's
     # decoder; the next command's HELLO must still be heard.
@@ -156,6 +160,7 @@ def test_failures_are_one_line(tmp_path, monkeypatch):
         os.close(slave)
 
 
+@pytest.mark.firmware
 def test_a_pen_that_cannot_take_the_request():
     with SimPen(protocol_version=2) as other:
         result = run_cli("device", "info", "--port", other.port)
@@ -195,6 +200,7 @@ def wait_until_played(sim_pid: int, value: int, count: float, timeout: float = 6
         time.sleep(0.02)
 
 
+@pytest.mark.firmware
 def test_sim_prints_its_port_and_writes_the_wav_when_interrupted(tmp_path):
     record, trace = tmp_path / "pen.wav", tmp_path / "trace.jsonl"
     process = subprocess.Popen([sys.executable, "-m", "realpen", "device", "sim", "--record",
@@ -223,6 +229,7 @@ def test_sim_prints_its_port_and_writes_the_wav_when_interrupted(tmp_path):
     assert any(json.loads(line)["event"] == "set_state" for line in trace.read_text().splitlines())
 
 
+@pytest.mark.firmware
 def test_sim_says_when_its_firmware_dies_and_still_writes_the_wav(tmp_path):
     record = tmp_path / "pen.wav"
     process = subprocess.Popen([sys.executable, "-m", "realpen", "device", "sim", "--record",

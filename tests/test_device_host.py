@@ -55,6 +55,18 @@ def wait_for(condition, timeout: float = 3.0) -> bool:
     return condition()
 
 
+def played_since_state(sim: SimPen, index: int) -> int:
+    """Samples the pen has played since its ``index``-th SET_STATE took effect (0 before it),
+    less the silence of underruns: what the sink has done, whatever the machine's load."""
+    events = sim.events()
+    states = [e for e in events if e["event"] == "set_state"]
+    if len(states) <= index:
+        return 0
+    start = states[index]["sample"]
+    silent = sum(e["missing"] for e in events if e["event"] == "underrun" and e["sample"] >= start)
+    return len(sim.samples()) - start - silent
+
+
 def pattern_events(client: PenClient, timeout: float = 0.3, until: int | None = None) -> list[int]:
     """The ids of the EV_PATTERN events that arrive within ``timeout`` s (or until ``until``
     has come)."""
@@ -278,6 +290,7 @@ def test_sim_says_which_extra_brings_micropython(monkeypatch, tmp_path):
 
 # --- the client against the real firmware -----------------------------------------------------
 
+@pytest.mark.firmware
 def test_hello_info_ping(pen):
     with PenClient(open_transport(pen.port)) as client:
         info = client.hello()
@@ -292,6 +305,7 @@ def test_hello_info_ping(pen):
         assert client.sync() > 0 and client.decode_errors == 0
 
 
+@pytest.mark.firmware
 def test_upload_24_kb_and_play_and_stop(tmp_path):
     samples = pen_pattern(PENCIL, 8000)
     sent = []
@@ -306,10 +320,10 @@ def test_upload_24_kb_and_play_and_stop(tmp_path):
             assert pattern_events(client, 2.0, pattern_id) == [pattern_id]  # idle: swapped in at once
             client.set_state(True, 1.0, fade_ms=5)
             client.sync()
-            time.sleep(0.3)
+            assert wait_for(lambda: played_since_state(sim, 0) >= 0.3 * 8000, 60)
             client.set_state(False, 0.0, fade_ms=5)
             client.sync()
-            time.sleep(0.15)
+            assert wait_for(lambda: played_since_state(sim, 1) >= 0.15 * 8000, 60)
         sim.stop()
     assert elapsed < 3.0, elapsed  # ~0.1 s over a pseudo-terminal
     assert sent[-1] == (24000, 24000) and len(sent) == -(-24000 // p.MAX_CHUNK)
@@ -368,6 +382,7 @@ class CorruptingTransport(Transport):
         self.inner.close()
 
 
+@pytest.mark.firmware
 @pytest.mark.parametrize("drop", [False, True], ids=["crc-mismatch", "chunk-lost"])
 def test_a_damaged_upload_is_refused_and_the_pen_keeps_its_pattern(pen, drop):
     good, bad = tone(3000, seed=1), tone(3000, seed=2)
@@ -389,6 +404,7 @@ def test_a_damaged_upload_is_refused_and_the_pen_keeps_its_pattern(pen, drop):
         assert pattern_events(client, 2.0, 4242) == [4242]
 
 
+@pytest.mark.firmware
 def test_a_pen_of_another_protocol_version():
     with SimPen(protocol_version=2) as sim:
         with PenClient(open_transport(sim.port)) as client:
@@ -493,6 +509,7 @@ def test_an_upload_waits_for_the_pen_after_as_many_chunks_as_the_link_lets_run_a
     assert runs == {16: [16, 1], 4: [4, 4, 4, 4, 1]}
 
 
+@pytest.mark.firmware
 def test_a_pattern_too_large_for_the_pen():
     with SimPen(max_pattern_bytes=16000) as sim:
         with PenClient(open_transport(sim.port)) as client:
@@ -507,6 +524,7 @@ def test_a_pattern_too_large_for_the_pen():
             client.sync()
 
 
+@pytest.mark.firmware
 def test_upload_refuses_samples_that_are_no_pattern(pen):
     with PenClient(open_transport(pen.port)) as client:
         for samples in (np.zeros(10), np.zeros((4, 2), np.int16), np.zeros(0, np.int16)):
@@ -516,6 +534,7 @@ def test_upload_refuses_samples_that_are_no_pattern(pen):
             client.upload(tone(10), 8000, pattern_id=70000)
 
 
+@pytest.mark.firmware
 def test_relative_paths_are_the_callers_not_the_firmwares(tmp_path, monkeypatch):
     # The firmware runs in firmware/pico: a relative path must still mean the caller's folder.
     monkeypatch.chdir(tmp_path)
@@ -529,6 +548,7 @@ def test_relative_paths_are_the_callers_not_the_firmwares(tmp_path, monkeypatch)
     assert not (tmp_path / "pen").exists()  # the link goes with the pen
 
 
+@pytest.mark.firmware
 def test_events_from_a_rebooted_pen(tmp_path):
     with SimPen(link=tmp_path / "pen") as sim:
         with PenClient(open_transport(str(tmp_path / "pen"))) as client:

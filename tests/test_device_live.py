@@ -343,6 +343,7 @@ def test_a_pen_never_there_is_said_and_tried_again():
         bridge.close()
 
 
+@pytest.mark.slow
 def test_an_idle_link_is_pinged_once_a_second():
     # A PING wakes a battery pen's radio over Bluetooth: an idle link is checked gently.
     pen, pings = FakePen(), []
@@ -460,6 +461,7 @@ def u16(fraction: float) -> int:
     return round(fraction * 65535)
 
 
+@pytest.mark.firmware
 def test_the_page_drives_the_simulated_pen_through_the_server(sim_server):
     """Each step waits for the firmware to apply it: the trace has the SET_STATE a block of the
     player applied (several decoded within one block: the last), so steps are not hurried."""
@@ -549,6 +551,7 @@ def test_the_page_drives_the_simulated_pen_through_the_server(sim_server):
         f"at sample {new_pen_at[1]}: a COMMIT and the SET_STATE decoded before one block")
 
 
+@pytest.mark.firmware
 def test_a_simulated_pen_whose_firmware_dies_is_restarted_and_hears_the_state(
         tmp_path, monkeypatch):
     import os
@@ -585,6 +588,7 @@ def test_a_simulated_pen_whose_firmware_dies_is_restarted_and_hears_the_state(
     assert not device.sim.alive  # the app's shutdown stopped it
 
 
+@pytest.mark.firmware
 def test_serve_with_the_simulated_pen_says_so_and_stops_it(tmp_path, monkeypatch):
     import realpen.live.server
 

@@ -129,6 +129,7 @@ def test_frames_larger_than_the_limit_are_refused_on_both_ends():
         p.pack_info(1, 1, 0, 0, 8000, 1, 0, "x" * (p.MAX_NAME + 1))
 
 
+@pytest.mark.firmware
 def test_micropython_runs_the_same_module_and_passes_the_same_vectors(tmp_path):
     """The pen imports this very file: it must run under MicroPython and agree byte for byte."""
     script = tmp_path / "check.py"

@@ -113,12 +113,9 @@ def server(tmp_path_factory):
             served.stop()
 
 
-@pytest.fixture(scope="module")
-def browser():
-    with sync_api.sync_playwright() as playwright:
-        instance = playwright.chromium.launch(executable_path=str(CHROMIUM), args=BLE_ARGS)
-        yield instance
-        instance.close()
+@pytest.fixture
+def browser(chromium):
+    return chromium(BLE_ARGS)
 
 
 def open_page(browser, server, init_script: str | None = None):
@@ -419,6 +416,7 @@ def longest_chunk_run(frames) -> int:
 
 
 
+@pytest.mark.firmware
 def test_web_serial_drives_the_firmware(browser, server, tmp_path):
     """Connect USB → HELLO/INFO, the pen's pattern uploaded at the pen's rate (a PING answered
     every 16 chunks) and swapped in at the firmware; a pen stroke → SET_STATE playing=1 with the

@@ -126,6 +126,7 @@ def test_without_ax_a_new_figure_outside_pyplot(analysis, pattern, loop,
     assert made[1].figure is made[2].figure  # the two panels of one call share a figure
 
 
+@pytest.mark.slow
 def test_save_profile_plot_keeps_the_users_figures(tmp_path, no_new_pyplot_figures):
     user = plt.figure()
     try:

@@ -20,6 +20,8 @@ import pytest
 
 from realpen.device import protocol as P
 
+pytestmark = pytest.mark.firmware  # every test runs the C core, compiled here with cc
+
 ROOT = Path(__file__).resolve().parents[1]
 DUE = ROOT / "firmware" / "arduino-due"
 SKETCH = DUE / "realpen_due"

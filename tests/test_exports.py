@@ -216,6 +216,7 @@ int main(void) {{
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler (cc) on this machine")
 @pytest.mark.parametrize("name,rate", [("pencil", None), ("ballpoint", 16000)])
 def test_c_header_compiles_and_its_table_is_the_quantised_pattern(tmp_path, pens, name, rate):
@@ -713,6 +714,7 @@ def test_exports_hold_at_most_ten_minutes(pens):
         render("haptic", medium, repeats=41)
 
 
+@pytest.mark.slow
 def test_sample_exports_are_bounded_in_frames(pens):
     with pytest.raises(ParameterError, match=r"^repeats: 100 × 576,000 frames at 384000 Hz make "
                                              r"57,600,000 frames"):

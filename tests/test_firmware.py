@@ -448,6 +448,7 @@ print(exercise(Allocating(8000, 1024)))
 """
 
 
+@pytest.mark.firmware
 def test_fill_allocates_nothing_under_heap_lock_and_the_check_can_fail(tmp_path):
     script = tmp_path / "heap.py"
     script.write_text(HEAP_SCRIPT.format(firmware=str(FIRMWARE)))
@@ -527,6 +528,7 @@ def fuzz_stream(count: int, seed: int) -> tuple[bytes, list[int]]:
     return b"".join(pieces), tokens
 
 
+@pytest.mark.firmware
 def test_ten_to_the_fifth_fuzzed_frames_never_crash_the_firmware_and_it_resyncs(tmp_path):
     stream, tokens = fuzz_stream(100_000, seed=12)
     data = tmp_path / "fuzz.bin"
@@ -819,6 +821,7 @@ sys.stderr.write("ble %d %d %s %s %d %d %d\\n" % (
 DMA_HALF_FRAMES = 32  # 128-byte halves of 16-bit stereo frames (ports/rp2/machine_i2s.c:51-52)
 
 
+@pytest.mark.firmware
 def test_the_pico_entry_point_runs_over_fake_hardware(tmp_path):
     """main.py and ble_pico.py cannot meet a real Pico here; this runs them under the Unix port
     with fake ``micropython`` (kbd_intr), ``machine``, ``rp2`` and ``bluetooth`` modules: Ctrl-C
@@ -938,6 +941,7 @@ def reconstruct(events: list[dict], total: int, patterns: dict[int, list[int]]) 
     return np.array(out[:total], dtype=np.int64)
 
 
+@pytest.mark.firmware
 def test_end_to_end_upload_play_gain_stop_and_a_corrupted_upload_keeps_the_old_pattern(tmp_path):
     rng = np.random.default_rng(3)
     pattern = rng.integers(-30000, 30000, 1200).astype(np.int16)  # 150 ms: many loops
@@ -994,6 +998,7 @@ def test_end_to_end_upload_play_gain_stop_and_a_corrupted_upload_keeps_the_old_p
     assert quiet < len(played) and not played[quiet:].any()
 
 
+@pytest.mark.firmware
 def test_restart_reboots_the_pen_on_a_new_pty_behind_the_same_link(tmp_path):
     link = tmp_path / "pen-port"
     with SimPen(link=link, protocol_version=2) as pen:
@@ -1016,6 +1021,7 @@ def test_restart_reboots_the_pen_on_a_new_pty_behind_the_same_link(tmp_path):
     assert not link.exists() and not pen.alive
 
 
+@pytest.mark.firmware
 def test_sim_pen_errors_are_one_clear_line(tmp_path):
     with pytest.raises(RealPenError, match="no such MicroPython executable"):
         SimPen(micropython=str(tmp_path / "nothing")).start()

@@ -348,6 +348,7 @@ def test_cli_vibration_grid_end_to_end(tmp_path):
     assert_clean_failure(result, f"{bad}: line 4: missing.wav: no such file")
 
 
+@pytest.mark.slow
 def test_cli_hatt_end_to_end(hatt_dir, tmp_path):
     model = hatt_dir / "Models_Book.xml"
     _, sound = write_recordings(tmp_path)

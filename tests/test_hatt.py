@@ -115,6 +115,7 @@ def test_every_file_loads_with_a_valid_triangulation(hatt_files):
         assert area == pytest.approx(s.max_speed * s.max_force, rel=1e-6), path.name
 
 
+@pytest.mark.slow
 def test_stored_lsfs_give_the_stored_coefficients(hatt_files):
     for path in hatt_files:
         for k, m in enumerate(load_hatt(path).models):
@@ -177,6 +178,7 @@ def test_spectrum_of_book_moves_up_and_grows_with_speed(book):
     assert fast[1] > 1.3 * slow[1]
 
 
+@pytest.mark.slow
 def test_speed_and_force_may_vary_over_time(book):
     constant = synthesize(book, np.full(2000, 150.0), 2.0, 2.0, seed=4)
     np.testing.assert_allclose(constant.samples, synthesize(book, 150.0, 2.0, 2.0, seed=4).samples)

@@ -420,6 +420,7 @@ def run_limited(*args, cwd: Path) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=300, preexec_fn=limit)
 
 
+@pytest.mark.slow
 def test_a_good_recording_is_analysed_under_the_memory_limit(tmp_path):
     result = run_limited("analyze", example_recording_path(), cwd=tmp_path)
     assert result.returncode == 0, result.stderr
@@ -449,6 +450,7 @@ def _long_field(tmp_path: Path) -> Path:
     (_long_wav, f"an analysis takes at most {MAX_UNITS:,}"),
     (_long_field, f"CSV lines are limited to {MAX_CSV_LINE_CHARS:,}"),
 ])
+@pytest.mark.slow
 def test_worst_files_are_refused_in_one_line_under_the_memory_limit(tmp_path, make, limit):
     path = make(tmp_path)
     result = run_limited("analyze", path.name, cwd=tmp_path)

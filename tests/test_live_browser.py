@@ -24,9 +24,9 @@ import numpy as np
 import pytest
 from live_support import CHROMIUM, CHROMIUM_ARGS, CHROMIUM_MISSING, low_rate_profile, serve
 
+from realpen.motion.coupling import Coupling, one_pole
+from realpen.motion.trajectory import Trajectory
 from realpen.profile import resolve_profile
-from realpen.sound.coupling import Coupling, one_pole
-from realpen.sound.stroke import Trajectory
 
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
 GESTURE_ARGS = [arg for arg in CHROMIUM_ARGS if not arg.startswith("--autoplay-policy")]
@@ -47,17 +47,9 @@ def server(tmp_path_factory):
         yield served
 
 
-@pytest.fixture(scope="module")
-def playwright():
-    with sync_api.sync_playwright() as instance:
-        yield instance
-
-
-@pytest.fixture(scope="module")
-def browser(playwright):
-    instance = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-    yield instance
-    instance.close()
+@pytest.fixture
+def browser(chromium):
+    return chromium(CHROMIUM_ARGS)
 
 
 class Page:
@@ -124,6 +116,12 @@ class Page:
     def settle(self) -> None:
         self.page.wait_for_function("() => !window.realpen.down && "
                                     "window.realpen.link.unacked === 0")
+
+    def settle_gain(self) -> None:
+        """Wait until the audio gain has reached its target: it ramps on the audio clock, which
+        a loaded machine runs late, so a fixed hold is not always enough."""
+        self.page.wait_for_function("() => realpen.targetGain > 0 && "
+                                    "Math.abs(realpen.gain - realpen.targetGain) < 1e-3")
 
     def trace(self, stroke: int | None = None) -> list[dict]:
         entries = self.eval("window.realpen.trace")
@@ -221,6 +219,7 @@ def test_pen_stroke_gives_ink_eq1_gain_device_messages_and_a_stored_stroke(open_
     coupling = Coupling(**page.eval("realpen.coupling"))
     points = writing()
     page.stroke(points, hold_s=0.12, lift=False)  # hold still: the audio gain settles
+    page.settle_gain()
     held = page.eval("({gain: realpen.gain, target: realpen.targetGain, "
                      "state: realpen.audio.state})")
     assert held["state"] == "running"  # the browser runs with the autoplay flag
@@ -228,7 +227,7 @@ def test_pen_stroke_gives_ink_eq1_gain_device_messages_and_a_stored_stroke(open_
     x, y, _ = points[-1]
     page.pen("mouseReleased", x, y, 0.0, time.time())
     page.settle()
-    time.sleep(0.1)
+    page.page.wait_for_function("() => realpen.gain < 1e-3")  # on the audio clock: waited for
     assert page.eval("realpen.gain") < 1e-3  # silent on lift
 
     assert page.eval("realpen.inkedPixels()") > 200
@@ -601,12 +600,10 @@ ACTIVATION_RULES = """(() => {
 })();"""
 
 
-@pytest.fixture(scope="module")
-def gesture_browser(playwright):
+@pytest.fixture
+def gesture_browser(chromium):
     """Chromium without the autoplay flag: an AudioContext starts suspended."""
-    instance = playwright.chromium.launch(executable_path=str(CHROMIUM), args=GESTURE_ARGS)
-    yield instance
-    instance.close()
+    return chromium(GESTURE_ARGS)
 
 
 def test_audio_starts_from_the_first_event_that_gives_activation(gesture_browser, server):
@@ -633,6 +630,7 @@ def test_audio_starts_from_the_first_event_that_gives_activation(gesture_browser
             "() => document.getElementById('st-audio').textContent.startsWith('audio ')")
         # Running: a stroke plays at once, and nothing asks again.
         page.stroke(writing(40), hold_s=0.1, lift=False)
+        page.settle_gain()
         assert page.eval("realpen.gain") == pytest.approx(page.eval("realpen.targetGain"),
                                                           abs=1e-3)
         page.pen("mouseReleased", 300, 220, 0.0, time.time())

@@ -77,81 +77,84 @@ def test_the_server_offers_every_points_loop_and_single_point_pens_as_before(gri
     assert httpx.get(base + "api/profiles/pencil/grid/0.wav").status_code == 404
 
 
-def test_the_page_mixes_the_point_loops_at_the_pens_speed_and_force(grid_server):
+def test_the_page_mixes_the_point_loops_at_the_pens_speed_and_force(grid_server, chromium):
     grid = grid_server.profile.grid
-    with sync_api.sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            context = browser.new_context(viewport={"width": 1180, "height": 820})
-            context.set_default_timeout(15_000)
-            page = context.new_page()
-            problems: list[str] = []
-            page.on("pageerror", lambda error: problems.append(str(error)))
-            page.goto(grid_server.url + "?pen=gridpen&modality=tactile&tactile=audio")
-            page.wait_for_function("() => window.realpen && window.realpen.ready && "
-                                   "window.realpen.link.state === 'open'")
-            writing = Writing(page, context)
-            audio = page.evaluate("realpen.audio")
-            assert audio["playing"] == "gridpen" and audio["tactileLoops"] == len(POINTS)
-            assert audio["pointGains"] == [float(i == REFERENCE) for i in range(len(POINTS))]
-            # The grid bus keeps the mix at or below the loudest loop's peak.
-            assert audio["mixGain"] == pytest.approx(grid.mix_gain, rel=1e-6)
-            assert 0 < grid.mix_gain <= 1
+    context = chromium(CHROMIUM_ARGS).new_context(viewport={"width": 1180, "height": 820})
+    try:
+        context.set_default_timeout(15_000)
+        page = context.new_page()
+        problems: list[str] = []
+        page.on("pageerror", lambda error: problems.append(str(error)))
+        page.goto(grid_server.url + "?pen=gridpen&modality=tactile&tactile=audio")
+        page.wait_for_function("() => window.realpen && window.realpen.ready && "
+                               "window.realpen.link.state === 'open'")
+        writing = Writing(page, context)
+        audio = page.evaluate("realpen.audio")
+        assert audio["playing"] == "gridpen" and audio["tactileLoops"] == len(POINTS)
+        assert audio["pointGains"] == [float(i == REFERENCE) for i in range(len(POINTS))]
+        # The grid bus keeps the mix at or below the loudest loop's peak.
+        assert audio["mixGain"] == pytest.approx(grid.mix_gain, rel=1e-6)
+        assert 0 < grid.mix_gain <= 1
 
-            # The page's grid, everywhere: inside, on edges, outside the hull, at the points.
-            rng = np.random.default_rng(13)
-            queries = np.concatenate([rng.uniform([0, 0], [260, 4.5], (300, 2)),
-                                      [(s, f) for s, f, _ in POINTS], [(80, 0.6), (0, 0)]])
-            sent = page.evaluate("realpen.profiles.find((p) => p.name === 'gridpen').grid")
-            gains = page.evaluate("([g, q]) => { const grid = new realpen.model.VibrationGrid(g);"
-                                  " return q.map(([s, f]) => grid.gains(s, f)); }",
-                                  [sent, queries.tolist()])
-            expected = np.array([grid.gains(s, f) for s, f in queries])
-            assert np.max(np.abs(np.array(gains) - expected)) < 1e-9
+        # The page's grid, everywhere: inside, on edges, outside the hull, at the points.
+        rng = np.random.default_rng(13)
+        queries = np.concatenate([rng.uniform([0, 0], [260, 4.5], (300, 2)),
+                                  [(s, f) for s, f, _ in POINTS], [(80, 0.6), (0, 0)]])
+        sent = page.evaluate("realpen.profiles.find((p) => p.name === 'gridpen').grid")
+        gains = page.evaluate("([g, q]) => { const grid = new realpen.model.VibrationGrid(g);"
+                              " return q.map(([s, f]) => grid.gains(s, f)); }",
+                              [sent, queries.tolist()])
+        expected = np.array([grid.gains(s, f) for s, f in queries])
+        assert np.max(np.abs(np.array(gains) - expected)) < 1e-9
 
-            # Two strokes: slow and light (inside a triangle: three loops mix), then fast and
-            # firm (beyond the hull: the two loops of its nearest edge).
-            for px_per_step, pressure, mixing in ((1.0, 0.2, 3), (6.0, 0.75, 2)):
-                writing.stroke([(80 + px_per_step * i, 200 + 150 * (mixing == 2), pressure)
-                                for i in range(40)])
-                time.sleep(0.1)  # holding still: the smoothed gains settle
-                held = page.evaluate("({speed: realpen.speed, pressure: realpen.pressure, "
-                                     "targets: realpen.pointTargets, gains: realpen.pointGains,"
-                                     " tactile: realpen.tactileGain, "
-                                     "tactileTarget: realpen.tactileTarget})")
-                force = held["pressure"] * grid.full_pressure_force_n
-                want = grid.gains(held["speed"], force)
-                assert np.max(np.abs(np.array(held["targets"]) - want)) < 1e-6
-                assert np.count_nonzero(want) == mixing, (held["speed"], force)
-                assert np.sum(want ** 2) == pytest.approx(1.0)  # equal power
-                assert np.max(np.abs(np.array(held["gains"]) - want)) < 1e-3
-                assert held["tactileTarget"] > 0
-                assert held["tactile"] == pytest.approx(held["tactileTarget"], abs=1e-3)
-                writing.lift()
-            # The device log hears the strokes as with any pen (a pen plays the reference pattern).
-            session = page.evaluate("realpen.link.session")
-            log = httpx.get(grid_server.base + "api/device/log").json()["entries"]
-            downs = [e for e in log if e["session"] == session and e["kind"] == "pen_down"]
-            assert [e["detail"]["pen"] for e in downs] == ["gridpen", "gridpen"]
-            ARTIFACTS.mkdir(exist_ok=True)
-            page.screenshot(path=str(ARTIFACTS / "live-grid.png"))
-
-            # A pen without a grid: one tactile loop, no point gains.
-            page.click("#pens button[data-value=pencil]")
-            page.wait_for_function("() => realpen.pen === 'pencil'")
-            writing.stroke([(300 + 3 * i, 500, 0.5) for i in range(30)])
-            time.sleep(0.1)
-            state = page.evaluate("({audio: realpen.audio, targets: realpen.pointTargets, "
-                                  "gains: realpen.pointGains, tactile: realpen.tactileGain, "
-                                  "tactileTarget: realpen.tactileTarget})")
-            assert state["audio"]["tactileLoops"] == 1 and state["audio"]["playing"] == "pencil"
-            assert state["targets"] is None and state["gains"] is None
-            assert state["tactileTarget"] > 0
-            assert state["tactile"] == pytest.approx(state["tactileTarget"], abs=1e-3)
+        # Two strokes: slow and light (inside a triangle: three loops mix), then fast and
+        # firm (beyond the hull: the two loops of its nearest edge).
+        for px_per_step, pressure, mixing in ((1.0, 0.2, 3), (6.0, 0.75, 2)):
+            writing.stroke([(80 + px_per_step * i, 200 + 150 * (mixing == 2), pressure)
+                            for i in range(40)])
+            # Holding still, the smoothed gains settle (on the audio clock: waited for).
+            page.wait_for_function(
+                "() => realpen.pointGains.every((g, i) => "
+                "Math.abs(g - realpen.pointTargets[i]) < 1e-3) && realpen.tactileTarget > 0 "
+                "&& Math.abs(realpen.tactileGain - realpen.tactileTarget) < 1e-3")
+            held = page.evaluate("({speed: realpen.speed, pressure: realpen.pressure, "
+                                 "targets: realpen.pointTargets, gains: realpen.pointGains,"
+                                 " tactile: realpen.tactileGain, "
+                                 "tactileTarget: realpen.tactileTarget})")
+            force = held["pressure"] * grid.full_pressure_force_n
+            want = grid.gains(held["speed"], force)
+            assert np.max(np.abs(np.array(held["targets"]) - want)) < 1e-6
+            assert np.count_nonzero(want) == mixing, (held["speed"], force)
+            assert np.sum(want ** 2) == pytest.approx(1.0)  # equal power
+            assert np.max(np.abs(np.array(held["gains"]) - want)) < 1e-3
+            assert held["tactileTarget"] > 0
+            assert held["tactile"] == pytest.approx(held["tactileTarget"], abs=1e-3)
             writing.lift()
-            assert problems == []
-        finally:
-            browser.close()
+        # The device log hears the strokes as with any pen (a pen plays the reference pattern).
+        session = page.evaluate("realpen.link.session")
+        log = httpx.get(grid_server.base + "api/device/log").json()["entries"]
+        downs = [e for e in log if e["session"] == session and e["kind"] == "pen_down"]
+        assert [e["detail"]["pen"] for e in downs] == ["gridpen", "gridpen"]
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "live-grid.png"))
+
+        # A pen without a grid: one tactile loop, no point gains.
+        page.click("#pens button[data-value=pencil]")
+        page.wait_for_function("() => realpen.pen === 'pencil'")
+        writing.stroke([(300 + 3 * i, 500, 0.5) for i in range(30)])
+        page.wait_for_function("() => realpen.tactileTarget > 0 && "
+                               "Math.abs(realpen.tactileGain - realpen.tactileTarget) < 1e-3")
+        state = page.evaluate("({audio: realpen.audio, targets: realpen.pointTargets, "
+                              "gains: realpen.pointGains, tactile: realpen.tactileGain, "
+                              "tactileTarget: realpen.tactileTarget})")
+        assert state["audio"]["tactileLoops"] == 1 and state["audio"]["playing"] == "pencil"
+        assert state["targets"] is None and state["gains"] is None
+        assert state["tactileTarget"] > 0
+        assert state["tactile"] == pytest.approx(state["tactileTarget"], abs=1e-3)
+        writing.lift()
+        assert problems == []
+    finally:
+        context.close()
 
 
 class Writing:

@@ -219,6 +219,7 @@ def test_a_write_whose_caller_stopped_waiting_is_still_made(store_target):
 
 
 
+@pytest.mark.slow
 def test_a_killed_server_leaves_its_store_to_the_next_which_closes_its_strokes(tmp_path):
     path = tmp_path / "s.sqlite3"
     process = subprocess.Popen([sys.executable, "-c", CRASHER, str(path)], text=True,
@@ -378,11 +379,17 @@ def test_the_device_log_comes_in_pages(tmp_path, monkeypatch):
 
 # ---- a real uvicorn: slow clients and bad frames ---------------------------------------------
 
-@pytest.fixture
-def uvicorn_server(tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def uvicorn_server(tmp_path_factory):
     """The live app under uvicorn with the server's own configuration, head timeout 0.5 s,
-    and a route with a bug (``/boom``)."""
-    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    and a route with a bug (``/boom``); one for the module, as its tests only read."""
+    folder = tmp_path_factory.mktemp("uvicorn")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("REALPEN_HOME", str(folder / "home"))  # no user profiles of this machine
+        yield from _uvicorn_server(folder)
+
+
+def _uvicorn_server(tmp_path):
     app = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3"))
 
     def boom():

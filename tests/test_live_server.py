@@ -445,6 +445,7 @@ def ws_url(base: str, token: str | None = None) -> str:
     return base.replace("http://", "ws://") + "ws" + (f"?token={token}" if token else "")
 
 
+@pytest.mark.slow
 def test_lan_token_is_required_on_http_and_websocket(tmp_path):
     from websockets.exceptions import InvalidStatus
 
@@ -479,6 +480,7 @@ def test_lan_token_is_required_on_http_and_websocket(tmp_path):
         assert refused.value.response.status_code == 403
 
 
+@pytest.mark.slow
 def test_oversized_frames_and_the_server_keeps_answering(tmp_path):
     from websockets.exceptions import ConnectionClosed
 
@@ -500,6 +502,7 @@ def test_oversized_frames_and_the_server_keeps_answering(tmp_path):
         assert httpx.get(server.base + "api/status").status_code == 200
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_cleanly_with_nothing_lost(tmp_path):
     store_path = tmp_path / "strokes.sqlite3"
     messages = stroke_messages("ballpoint", n=30)[:-1]  # the pen is still down at Ctrl-C
@@ -559,6 +562,7 @@ def broken_profiles(tmp_path):
     return extra
 
 
+@pytest.mark.slow
 def test_a_skipped_profile_is_reported_once_on_stdout(tmp_path):
     extra = broken_profiles(tmp_path)
     with serve(tmp_path, "--profiles", str(extra), stderr_to=tmp_path / "stderr.txt") as server:
@@ -573,6 +577,7 @@ def test_a_skipped_profile_is_reported_once_on_stdout(tmp_path):
                                  "/proc/x.sqlite3"), "/proc/x.sqlite3")
 
 
+@pytest.mark.slow
 def test_serve_prints_url_and_tactile_setting(tmp_path):
     with serve(tmp_path, "--tactile", "audio") as server:
         assert server.token is None

@@ -146,31 +146,29 @@ SCENARIOS = """async () => {
 
 
 @pytest.fixture(scope="module")
-def page():
-    with sync_api.sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            context = browser.new_context()
-            context.add_init_script(COUNT_TIMERS)
+def page(chromium):
+    context = chromium(CHROMIUM_ARGS).new_context()
+    try:
+        context.add_init_script(COUNT_TIMERS)
 
-            def serve(route):
-                path = route.request.url.removeprefix(ORIGIN)
-                if path.startswith("/static/"):
-                    file = STATIC / path.removeprefix("/static/")
-                    route.fulfill(path=str(file), content_type="text/javascript")
-                else:
-                    route.fulfill(body="<!doctype html><title>pen link</title>",
-                                  content_type="text/html")
+        def serve(route):
+            path = route.request.url.removeprefix(ORIGIN)
+            if path.startswith("/static/"):
+                file = STATIC / path.removeprefix("/static/")
+                route.fulfill(path=str(file), content_type="text/javascript")
+            else:
+                route.fulfill(body="<!doctype html><title>pen link</title>",
+                              content_type="text/html")
 
-            context.route(f"{ORIGIN}/**", serve)
-            tab = context.new_page()
-            problems: list[str] = []
-            tab.on("pageerror", lambda error: problems.append(str(error)))
-            tab.goto(f"{ORIGIN}/")
-            yield tab
-            assert problems == []
-        finally:
-            browser.close()
+        context.route(f"{ORIGIN}/**", serve)
+        tab = context.new_page()
+        problems: list[str] = []
+        tab.on("pageerror", lambda error: problems.append(str(error)))
+        tab.goto(f"{ORIGIN}/")
+        yield tab
+        assert problems == []
+    finally:
+        context.close()
 
 
 def test_the_pen_link_holds_timers_only_while_a_pen_is_connected(page):

@@ -617,6 +617,7 @@ def test_speed_is_the_pages_path_length_over_the_last_20_ms():
     np.testing.assert_allclose(steps, [0, 12.8, 12.8, 12.8, 12.8, 51.2, 51.2, 51.2, 12.8, 12.8])
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("node") is None, reason="node is not installed")
 def test_speed_matches_pen_js_run_by_node(tmp_path):
     page = Path(realpen.__file__).parent / "live" / "static" / "pen.js"

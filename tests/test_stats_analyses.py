@@ -88,6 +88,7 @@ def test_study1_friedman_of_the_conditions_equals_scipy_on_participants_cells(st
     assert (found["df1"], found["n"]) == (5, 12)
 
 
+@pytest.mark.slow
 def test_study1_splits_the_conditions_and_names_the_friedman_variant(study1_csv, study1):
     for factor in ("superposition", "fluctuation"):
         found = rows(study1.results, analysis=f"friedman/{factor}/average", outcome="Q2")
@@ -182,6 +183,7 @@ def test_study2_questionnaire_confusion_and_times(study2):
     assert times["mean"].between(1000, 20000).all()  # geometric means in ms, not logs
 
 
+@pytest.mark.slow
 def test_the_wilcoxon_method_is_named_and_changes_tied_p(study1_csv):
     trials = read_trials(study1_csv, STUDY1)
     found = {}
@@ -212,6 +214,7 @@ def edited(source: Path, target: Path, change) -> Path:
     return target
 
 
+@pytest.mark.slow
 def test_a_participant_missing_a_cell_is_refused_or_excluded_and_listed(study1_csv, tmp_path):
     path = edited(study1_csv, tmp_path / "t.csv", lambda records: [
         r for r in records if not (r["participant"] == "S03" and r["condition"] == "E"
@@ -252,6 +255,7 @@ def test_bad_trials_files_get_one_line(study1_csv, tmp_path, change, message):
     assert "\n" not in str(caught.value) and str(caught.value).startswith(str(path))
 
 
+@pytest.mark.slow
 def test_two_participants_and_untestable_sphericity_do_not_crash(tmp_path):
     frame = simulated_trials(STUDY2, 2, seed=1)
     analysis = analyse(read_trials(write_csv(frame, tmp_path / "two.csv"), STUDY2))
@@ -294,6 +298,7 @@ def test_several_recognition_questions_are_separate_outcomes():
 
 # -- the command ---------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_the_command_writes_the_report_folder(study2_csv, tmp_path):
     out = tmp_path / "report"
     result = run_cli("stats", "study2", str(study2_csv), "-o", str(out), "--paper-compatible",
@@ -333,6 +338,7 @@ def test_power_command_prints_a_table_and_plots(tmp_path):
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_simulated_participants_through_the_store_to_the_report(tmp_path):
     """The whole path a study takes: plan → answers through the study service into a real
     SQLite store → its export → ``realpen stats``."""

@@ -50,12 +50,9 @@ def server(tmp_path_factory):
             yield served
 
 
-@pytest.fixture(scope="module")
-def browser():
-    with sync_api.sync_playwright() as playwright:
-        instance = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield instance
-        instance.close()
+@pytest.fixture
+def browser(chromium):
+    return chromium(CHROMIUM_ARGS)
 
 
 class Browser:

@@ -12,8 +12,11 @@ import threading
 import time
 
 import httpx
+import pytest
 from live_support import serve, study_answers
 from sqlalchemy import create_engine, text
+
+pytestmark = pytest.mark.slow  # three servers and a whole study per store: 15-25 s each
 
 PARTICIPANTS = ("P01", "P02")
 KILLS = (20, 70)  # the server is killed once the clients have this many answers acknowledged

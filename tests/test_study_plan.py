@@ -305,6 +305,7 @@ def test_cli_schema(tmp_path):
     assert_clean_failure(run_cli("study", "schema", "-o", out), "exists; pass --force")
 
 
+@pytest.mark.slow
 def test_study_help_stays_light():
     """``realpen study plan --help`` loads no numpy, PyYAML or design module (typer itself
     loads pydantic for a subcommand's help; ``realpen --help`` does not)."""

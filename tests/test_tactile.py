@@ -255,7 +255,7 @@ def test_condition_sets_its_counts():
     ({"condition": "Z"}, "condition"), ({"unit_ms": 150, "selection_unit_ms": 100},
                                         "selection_unit_ms"),
     ({"top": 2.5}, "top"),
-    # Limits on what sizes the pattern or its analysis (realpen.dsp.limits, synthesis).
+    # Limits on what sizes the pattern or its analysis (realpen.checks).
     ({"top": 101}, "top"), ({"subpatterns": 1001}, "subpatterns"),
     ({"unit_ms": 60_001}, "unit_ms"), ({"seed": 2 ** 63}, "seed"), ({"cap_db": 61}, "cap_db"),
     ({"rate": 99}, "rate"), ({"analysis_rate": 400_001}, "analysis_rate"),

@@ -43,7 +43,6 @@ from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
-from scipy import optimize, signal
 
 from realpen.errors import ParameterError, fail
 from realpen.io.csvtable import read_csv
@@ -183,6 +182,10 @@ def one_pole(values: np.ndarray, rate: float, smoothing_ms: float,
     values = np.asarray(values, dtype=np.float64)
     if smoothing_ms <= 0 or len(values) == 0:
         return values.copy()
+    # scipy.signal here, not at the top: the live server and the CLI load this module for the
+    # Coupling type alone, and importing scipy.signal costs them seconds at every start.
+    from scipy import signal
+
     alpha = 1.0 - math.exp(-1.0 / (rate * smoothing_ms / 1000.0))
     smoothed, _ = signal.lfilter([alpha], [1.0, alpha - 1.0], values,
                                  zi=[(1.0 - alpha) * initial])
@@ -265,6 +268,8 @@ def fit_coupling(pressure: np.ndarray, speed: np.ndarray, amplitude: np.ndarray,
     rows = inside if inside.sum() >= 3 and np.linalg.matrix_rank(design[inside]) == 3 else \
         np.ones_like(inside)
     start, *_ = np.linalg.lstsq(design[rows], target[rows], rcond=None)
+    from scipy import optimize  # only fitting needs it (see one_pole for why not at the top)
+
     solution = optimize.least_squares(
         lambda theta: np.clip(design @ theta, 0.0, base.a_max) - target, start,
         x_scale="jac").x
