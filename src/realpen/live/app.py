@@ -44,6 +44,11 @@ def create_app(settings: LiveSettings | None = None) -> FastAPI:
         The app; its :class:`~realpen.live.state.LiveState` is ``app.state.live``.
     """
     settings = settings or LiveSettings()
+    # Routes resample and smooth with scipy.signal in worker threads, and scipy's lazy loading
+    # of its submodules is not thread-safe (two first requests at once can fail with
+    # "Module 'scipy' has no attribute '_lib'"): load it once, here, before any request.
+    import scipy.signal  # noqa: F401
+
     catalog = Catalog(settings.profiles)
     designs = load_designs(settings.designs)
     store = StrokeStore(settings.store or default_store())
