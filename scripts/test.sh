@@ -19,6 +19,19 @@ if [ "${1:-}" = "--fast" ]; then
     shift
     tier=(-m "not browser and not postgres and not firmware and not slow")
 fi
+# The page's JavaScript (ESLint, tsc) and, in the full run, the documentation site (mkdocs
+# --strict) are checked beside the set-up and the tests, which leave a core idle much of the
+# time: the JavaScript needs no venv and starts first, the docs once the venv is installed. Each
+# writes to a log that is shown only when it fails.
+checks_dir="$(mktemp -d)"
+trap 'rm -rf "$checks_dir"' EXIT
+js_pid=
+if command -v npm >/dev/null 2>&1; then
+    bash scripts/lint-js.sh >"$checks_dir/js.log" 2>&1 &
+    js_pid=$!
+else
+    echo "note: npm not found: the JavaScript lint (ESLint, tsc) is skipped" >&2
+fi
 # The tests start hundreds of Python processes (servers, the CLI, workers): let them keep the
 # bytecode they compile, in this venv and the checkout, even where the environment says not to
 # (PYTHONDONTWRITEBYTECODE); without it each would compile numpy, scipy and pandas again.
@@ -31,6 +44,11 @@ if .venv/bin/python -m pip install --quiet --disable-pip-version-check uv >/dev/
 else
     .venv/bin/python -m pip install --quiet --upgrade pip
     .venv/bin/python -m pip install --quiet -e '.[test,docs]'
+fi
+docs_pid=
+if [ "${#tier[@]}" -eq 0 ]; then
+    bash scripts/build-docs.sh "$checks_dir/site" >"$checks_dir/docs.log" 2>&1 &
+    docs_pid=$!
 fi
 # The browser tests drive Debian's Chromium, the store tests start a PostgreSQL server of
 # their own (initdb in a temporary folder), and the Arduino Due firmware's C core is compiled
@@ -58,23 +76,6 @@ fi
 # stops the run.
 .venv/bin/ruff check --no-cache .
 .venv/bin/lint-imports --no-cache >/dev/null || .venv/bin/lint-imports --no-cache
-# The page's JavaScript (ESLint, tsc) and, in the full run, the documentation site (mkdocs
-# --strict) are checked beside the tests: the tests mostly wait for browsers and servers, so the
-# two cores have room. Each writes to a log that is shown only when it fails.
-checks_dir="$(mktemp -d)"
-trap 'rm -rf "$checks_dir"' EXIT
-js_pid=
-if command -v npm >/dev/null 2>&1; then
-    bash scripts/lint-js.sh >"$checks_dir/js.log" 2>&1 &
-    js_pid=$!
-else
-    echo "note: npm not found: the JavaScript lint (ESLint, tsc) is skipped" >&2
-fi
-docs_pid=
-if [ "${#tier[@]}" -eq 0 ]; then
-    bash scripts/build-docs.sh "$checks_dir/site" >"$checks_dir/docs.log" 2>&1 &
-    docs_pid=$!
-fi
 # Two workers (pytest-xdist): the browser and server tests mostly wait, so two cores finish the
 # suite in about two thirds of the time one takes. --dist loadfile runs each module on one
 # worker, so its module-scoped set-up (servers, analyses, renders) is built once; the modules
