@@ -15,6 +15,8 @@ from realpen.cli.common import check_outputs, console, force_option, whole_numbe
 # realpen.exports.FORMATS' names, from the numpy-free defaults: help stays fast.
 from realpen.defaults import EXPORT_FORMATS as FORMAT_NAMES  # noqa: E402
 
+__all__ = ["export", "register"]
+
 
 def export(
     profile: str = typer.Argument(..., help="Profile name (pencil, ballpoint, marker, …) or a "

@@ -35,6 +35,8 @@ from realpen.defaults import SOUND_REFERENCE_DBFS as REFERENCE_DBFS  # noqa: E40
 from realpen.defaults import SOUND_UNIT_MS as UNIT_MS  # noqa: E402
 from realpen.defaults import TEXTURE_LENGTH_MS as LENGTH_MS  # noqa: E402
 
+__all__ = ["sound_app", "loop", "render", "fit", "register"]
+
 MODE_HELP = "loop (one seamless unit) | granular (overlapping grains, no repetition)."
 RATE_HELP = (f"Resample the sound to this rate in Hz ({MIN_RATE:g} to {MAX_RATE:g}; lower rates "
              f"leave too little band to judge the seam).")

@@ -27,6 +27,8 @@ AXIS_HELP = "How axes become one: dft321 (default for several axes), magnitude, 
 # from the numpy-free defaults: help stays fast.
 from realpen.defaults import CONDITIONS, RECOMMENDED_MODEL  # noqa: E402
 
+__all__ = ["tactile_app", "model_option", "model_options", "analyze", "tactile", "render", "register"]
+
 CONDITION_HELP = "Study-1 preset: " + ", ".join(
     f"{key}={top}×{subpatterns}×{unit_ms:g}ms"
     for key, (top, subpatterns, unit_ms) in CONDITIONS.items()) + " (default B)."
