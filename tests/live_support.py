@@ -65,14 +65,19 @@ class Served:
 
 @contextlib.contextmanager
 def serve(tmp_path: Path, *args: str, timeout: float = 30,
-          stderr_to: Path | None = None) -> Iterator[Served]:
+          stderr_to: Path | None = None, program: list[str] | None = None) -> Iterator[Served]:
     """Run ``realpen serve --port 0 --store tmp/strokes.sqlite3 ARGS`` until the block ends.
 
-    stderr goes with stdout, or to the file ``stderr_to`` (:meth:`Served.errors`).
+    stderr goes with stdout, or to the file ``stderr_to`` (:meth:`Served.errors`). ``program``
+    is the ``realpen`` to run (default: this interpreter's, ``python -m realpen``); another one
+    (an installed wheel's script) runs without this process's ``PYTHONPATH``.
     """
     env = {**os.environ, "REALPEN_HOME": str(tmp_path / "home"), "PYTHONUNBUFFERED": "1"}
+    if program is not None:
+        env.pop("PYTHONPATH", None)
     store = [] if "--store" in args else ["--store", str(tmp_path / "strokes.sqlite3")]
-    command = [sys.executable, "-m", "realpen", "serve", "--port", "0", *store, *args]
+    realpen = program if program is not None else [sys.executable, "-m", "realpen"]
+    command = [*realpen, "serve", "--port", "0", *store, *args]
     errors = open(stderr_to, "w") if stderr_to else None
     process = subprocess.Popen(command, stdout=subprocess.PIPE,
                                stderr=errors if errors else subprocess.STDOUT, text=True, env=env)

@@ -11,13 +11,10 @@ from __future__ import annotations
 
 import json
 import os
-import select
-import signal
 import subprocess
 import sys
 import sysconfig
 import tarfile
-import time
 import urllib.request
 import venv
 import zipfile
@@ -98,34 +95,12 @@ def test_the_installed_wheel_runs_from_its_own_files(wheel_venv):
 
 
 def test_serve_from_the_wheel_answers_with_the_bundled_pens(wheel_venv):
-    env = {**os.environ, "REALPEN_HOME": str(wheel_venv / "realpen-home"), "PYTHONUNBUFFERED": "1"}
-    env.pop("PYTHONPATH", None)
-    process = subprocess.Popen([str(wheel_venv / "bin" / "realpen"), "serve", "--port", "0"],
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                               env=env, cwd=wheel_venv)
-    try:
-        url, seen = None, []
-        deadline = time.monotonic() + 60
-        while url is None:
-            assert process.poll() is None and time.monotonic() < deadline, "".join(seen)
-            ready, _, _ = select.select([process.stdout], [], [], 0.5)
-            if ready:
-                line = process.stdout.readline()
-                seen.append(line)
-                if "RealPen live: http://" in line:
-                    url = line.split("RealPen live: ")[1].split()[0]
-        base = url.split("?")[0].rstrip("/")
+    from live_support import serve
+
+    with serve(wheel_venv, timeout=60, program=[str(wheel_venv / "bin" / "realpen")]) as served:
+        base = served.base.rstrip("/")
         with urllib.request.urlopen(f"{base}/api/profiles", timeout=30) as reply:
-            profiles = json.load(reply)
-        names = {profile["name"] for profile in (profiles["profiles"] if isinstance(profiles, dict)
-                                                 else profiles)}
+            names = {profile["name"] for profile in json.load(reply)["profiles"]}
         assert {"pencil", "ballpoint", "marker"} <= names
         with urllib.request.urlopen(f"{base}/", timeout=30) as reply:
             assert reply.status == 200 and b"<html" in reply.read().lower()
-    finally:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
