@@ -9,7 +9,7 @@ use, so ``import realpen`` itself is light (no numpy, scipy or matplotlib until 
   :func:`parse_actuator`.
 - Sound: :func:`find_loop`, :class:`SoundLoop`, :class:`Coupling` (Eq. 1).
 - Pen profiles and exports: :func:`load_profile`, :func:`save_profile`, :func:`list_profiles`,
-  :func:`export`.
+  :func:`export`, :func:`load_haptic` (read an exported haptic file back and render it).
 - Figures: :mod:`realpen.display` (every function draws into a given ``ax``).
 - Errors: :class:`RealPenError` (bad data), :class:`ParameterError` (bad arguments).
 
@@ -36,7 +36,7 @@ __all__ = [
     # sound
     "find_loop", "SoundLoop", "Coupling",
     # profiles and exports
-    "load_profile", "save_profile", "list_profiles", "export",
+    "load_profile", "save_profile", "list_profiles", "export", "load_haptic",
     # errors
     "RealPenError", "ParameterError",
     # figures (a subpackage, imported on first use: it needs matplotlib)
@@ -58,6 +58,7 @@ _HOMES: dict[str, str] = {
     "load_profile": "profile.registry",
     "save_profile": "profile.bundle",
     "list_profiles": "profile.registry",
+    "load_haptic": "exports.reading",
     "RealPenError": "errors",
     "ParameterError": "errors",
 }

@@ -25,6 +25,7 @@ import json
 from realpen._version import __version__
 from realpen.exports import envelope as env
 from realpen.exports.base import RESIDUAL_IN_ENVELOPE, Export, check_pattern, check_span, residual_limits
+from realpen.exports.haptic_rules import check_haptic
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["SUFFIX", "LIMITS", "build", "export"]
@@ -74,8 +75,14 @@ def build(pattern: TactilePattern, *, repeats: int = 1, name: str = "pattern", t
 def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "pattern",
            tool: str = "", version: str | None = None, repeats: int = 1) -> Export:
     """Render the ``.haptic`` file; see the module docstring. ``sound`` and ``coupling`` are
-    not carried."""
-    document = build(pattern, repeats=repeats, name=name, tool=tool, version=version)
+    not carried.
+
+    Raises:
+        RealPenError: the document breaks a Lofelt v1 rule
+            (:func:`~realpen.exports.haptic_rules.check_haptic`); nothing is written.
+    """
+    document = check_haptic(build(pattern, repeats=repeats, name=name, tool=tool,
+                                  version=version), f"{name}{SUFFIX}")
     points = document["signals"]["continuous"]["envelopes"]["amplitude"]
     return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
                   f"{len(points)} amplitude and frequency breakpoints over "

@@ -54,7 +54,7 @@ import json
 import numpy as np
 
 from realpen._version import __version__
-from realpen.errors import fail
+from realpen.errors import ParameterError, fail
 from realpen.exports.base import (
     RESIDUAL_NOT_CARRIED,
     Export,
@@ -66,13 +66,14 @@ from realpen.exports.base import (
 from realpen.tactile.pattern import Component, TactilePattern
 from realpen.tactile.synthesis import fade_samples, subpattern_samples
 
-__all__ = ["SUFFIX", "MAX_TIMESCALE", "MAX_DRIFT_RAD", "MAX_EFFECTS", "LIMITS", "effects",
-           "build", "export"]
+__all__ = ["SUFFIX", "MAX_TIMESCALE", "MAX_DRIFT_RAD", "MAX_PHASE", "MAX_EFFECTS", "LIMITS",
+           "REFERENCE_DEVICE_ID", "device_type", "creation_date", "effects", "build", "export"]
 
 SUFFIX = ".hjif"
 MAX_TIMESCALE = 48000
 RAMP = np.linspace(0.0, 1.0, 5)  # keyframes across each crossfade
 MAX_DRIFT_RAD = 0.05  # phase error allowed at an effect's ends from whole-Hz frequencies
+MAX_PHASE = 6.28318  # the effect schema's maximum phase (rad)
 MAX_EFFECTS = 100_000
 """The most sine effects one ``.hjif`` file holds (about 1 kB of JSON each): the method's
 pattern needs about 600 per period."""
@@ -81,6 +82,48 @@ LIMITS = (
     "no loop flag: whole periods; the wrap crossfade is cut at the file's two ends",
     "the sound is not carried",
 )
+
+
+REFERENCE_DEVICE_ID = 1
+"""The id of the one reference device (the pattern's actuator): the schema's ids start at 1,
+and the reference software's conformance check rejects 0."""
+_DEVICE_TYPES = {"lra": "LRA", "vca": "VCA", "voicecoil": "VCA", "voice-coil": "VCA",
+                 "erm": "ERM", "piezo": "Piezo"}
+
+
+def device_type(actuator) -> str:
+    """The schema's reference-device ``type`` of an actuator (``LRA``, ``VCA``, ``ERM``,
+    ``Piezo``), from the model name of its spec (``lra:f0=175,q=8`` → ``LRA``); ``Unknown``
+    for none or another model."""
+    if actuator is None:
+        return "Unknown"
+    model = str(actuator.spec).split(":", 1)[0].strip().lower()
+    return _DEVICE_TYPES.get(model, "Unknown")
+
+
+def creation_date(date: str | None = None) -> str:
+    """The file's ``date``: an RFC 3339 date-time, as the schema's ``"format": "date-time"``
+    asks.
+
+    Args:
+        date: an ISO 8601 date-time (kept, ``Z`` for UTC; a time without a zone is read as
+            UTC) or a date (its midnight UTC); None: now, UTC, to the second.
+
+    Raises:
+        ParameterError: (parameter ``date``) text that is neither.
+    """
+    if date is None:
+        moment = _dt.datetime.now(_dt.UTC).replace(microsecond=0)
+    else:
+        try:
+            moment = _dt.datetime.fromisoformat(str(date).strip())
+        except ValueError:
+            raise ParameterError("date", f"must be an ISO 8601 date or date-time, got "
+                                         f"{date!r}") from None
+    if moment.tzinfo is None:
+        moment = moment.replace(tzinfo=_dt.UTC)
+    text = moment.isoformat()
+    return text[:-6] + "Z" if text.endswith("+00:00") else text
 
 
 def _ramps(start: int, length: int, fade: int, component: Component
@@ -119,10 +162,18 @@ def _effect(start: int, length: int, fade: int, component: Component, first: int
     phase = (component.phase + 2 * np.pi * component.frequency_hz * (first - start) / rate
              + np.pi * (component.frequency_hz - frequency) * (last - first) / rate)
     return {"effect_type": "Basis", "position": int(ticks[0]),
-            "phase": round(float(np.mod(phase, 2 * np.pi)), 6), "base_signal": "Sine",
+            "phase": _schema_phase(phase), "base_signal": "Sine",
             "keyframes": [{"relative_position": int(k - ticks[0]),
                            "amplitude_modulation": round(float(a), 6),
-                           "frequency_modulation": frequency} for k, a in zip(ticks, v)]}
+                           **({"frequency_modulation": frequency} if index == 0 else {})}
+                          for index, (k, a) in enumerate(zip(ticks, v))]}
+
+
+def _schema_phase(phase: float) -> float:
+    """``phase`` (rad) in the schema's range 0 … :data:`MAX_PHASE` at 6 decimals; a phase
+    that rounds above it is within 3·10⁻⁶ rad of 2π, i.e. of 0."""
+    value = round(float(np.mod(phase, 2 * np.pi)), 6)
+    return 0.0 if value > MAX_PHASE else value
 
 
 def _pieces(component: Component, samples: int, rate: int) -> int:
@@ -178,7 +229,7 @@ def build(pattern: TactilePattern, *, repeats: int = 1, date: str | None = None,
     Args:
         pattern: the tactile pattern (its actuator, when known, is the reference device).
         repeats: periods of the tactile pattern laid end to end.
-        date: ISO 8601 date (default: today).
+        date: ISO 8601 date-time, or a date (read as its midnight UTC); default: now, UTC.
         name, tool, version: for the descriptions (version default: the pattern's).
     """
     pattern = check_pattern(pattern)
@@ -186,7 +237,9 @@ def build(pattern: TactilePattern, *, repeats: int = 1, date: str | None = None,
     found, timescale = effects(pattern, repeats, name)
     frequencies = [effect["keyframes"][0]["frequency_modulation"] for effect in found]
     actuator = pattern.actuator
-    device = {"id": 0, "name": actuator.spec if actuator is not None else "unspecified"}
+    device = {"id": REFERENCE_DEVICE_ID,
+              "name": actuator.spec if actuator is not None else "unspecified",
+              "type": device_type(actuator)}
     if actuator is not None and "f0" in actuator.params:
         device["resonance_frequency"] = float(actuator.params["f0"])
     band = {"band_type": "VectorialWave",
@@ -194,14 +247,15 @@ def build(pattern: TactilePattern, *, repeats: int = 1, date: str | None = None,
             "upper_frequency_limit": int(max(frequencies)),
             "effects": found}
     channel = {"id": 0, "description": f"{name} tactile pattern", "gain": 1.0,
-               "mixing_coefficient": 1.0, "body_part_mask": 0, "reference_device_id": 0,
+               "mixing_coefficient": 1.0, "body_part_mask": 0,
+               "reference_device_id": REFERENCE_DEVICE_ID,
                "bands": [band]}
     perception = {"id": 0, "avatar_id": 0,
                   "description": f"{title(name, tool)}: RealPen tactile pattern",
                   "perception_modality": "Vibrotactile", "reference_devices": [device],
                   "effect_library": [], "channels": [channel]}
     return {"version": "2023", "profile": "Main", "level": 1,
-            "date": date or _dt.date.today().isoformat(),
+            "date": creation_date(date),
             "description": f"RealPen {__version__}: {name}, {repeats} period(s) of the "
                            f"tactile pattern, version {version or pattern.version}",
             "timescale": timescale, "avatars": [], "perceptions": [perception], "syncs": []}

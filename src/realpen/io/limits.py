@@ -110,12 +110,15 @@ def _refuse_constant(name: str):
     raise ValueError(f"{name} is not a number RealPen accepts")
 
 
-def load_json(source: bytes | str | os.PathLike, what: object | None = None):
+def load_json(source: bytes | str | os.PathLike, what: object | None = None, *,
+              max_bytes: int = MAX_JSON_BYTES, max_values: int = MAX_JSON_VALUES):
     """Parse a JSON document within the limits above.
 
     Args:
         source: the document's bytes, or a path to read it from.
         what: how to name the document in errors (default: the path, or ``"JSON"``).
+        max_bytes: the largest document read (bytes; default :data:`MAX_JSON_BYTES`).
+        max_values: the most values it may hold (default :data:`MAX_JSON_VALUES`).
 
     Raises:
         RealPenError: one line naming the document: too large, not UTF-8, not valid JSON,
@@ -127,10 +130,10 @@ def load_json(source: bytes | str | os.PathLike, what: object | None = None):
     else:
         path = Path(source)
         name = what or path
-        data = read_bounded(path, MAX_JSON_BYTES, "JSON documents", name)
-    if len(data) > MAX_JSON_BYTES:
+        data = read_bounded(path, max_bytes, "JSON documents", name)
+    if len(data) > max_bytes:
         raise fail(name, f"is {len(data):,} bytes; JSON documents are limited to "
-                         f"{MAX_JSON_BYTES:,}")
+                         f"{max_bytes:,}")
     depth = json_depth(data)
     if depth > MAX_JSON_DEPTH:
         raise fail(name, f"is nested {depth} levels deep; the limit is {MAX_JSON_DEPTH}")
@@ -145,11 +148,11 @@ def load_json(source: bytes | str | os.PathLike, what: object | None = None):
         document = json.loads(text, parse_constant=_refuse_constant)
     except ValueError as error:  # JSONDecodeError, and NaN/Infinity refused above
         raise fail(name, f"is not valid JSON ({error})") from None
-    values = count_values(document, MAX_JSON_VALUES)
-    if values > MAX_JSON_VALUES:
+    values = count_values(document, max_values)
+    if values > max_values:
         # Validating that many values (each a possible error) would take gigabytes.
-        raise fail(name, f"holds more than {MAX_JSON_VALUES:,} values; the limit is "
-                         f"{MAX_JSON_VALUES:,}")
+        raise fail(name, f"holds more than {max_values:,} values; the limit is "
+                         f"{max_values:,}")
     try:  # a lone surrogate ("\ud800") parses, but is no text: it cannot be written back
         json.dumps(document, ensure_ascii=False).encode("utf-8")
     except UnicodeEncodeError:
