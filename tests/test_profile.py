@@ -325,8 +325,9 @@ def test_profile_from_real_recordings(hatt_dir, lmt_dir, tmp_path):
     # The exports take it like a bundled pen.
     from realpen.exports import FORMATS, export_profile
     for fmt in FORMATS:
-        export_profile(saved, fmt, tmp_path / f"real.{fmt}")
-        assert (tmp_path / f"real.{fmt}").stat().st_size > 100
+        out = tmp_path / f"real{FORMATS[fmt].SUFFIX}"
+        export_profile(saved, fmt, out)
+        assert out.stat().st_size > 100
     assert profile.meta.sound.seam["level_jump_db"] < 1.0
     assert profile.meta.provenance.sources[1].name == "G8RoughPaper_Sound_Movement_train1.wav"
     assert not any(Path(ROOT, "src").rglob("*RoughPaper*"))

@@ -29,6 +29,7 @@ __all__ = ["DEFAULT_FLAGS", "COMMAND_FLAGS", "flag_for", "raising_functions", "d
 DEFAULT_FLAGS: dict[str, str] = {
     # recordings and their analysis (realpen.io, realpen.dsp)
     "rate": "--rate",
+    "subtype": "--subtype",
     "unit_ms": "--unit-ms",
     "top": "--top",
     "count": "--subpatterns",

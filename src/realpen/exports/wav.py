@@ -1,4 +1,4 @@
-"""WAV for actuators driven from an audio output.
+"""WAV for actuators driven from an audio output, and for the players that loop it.
 
 - mono: the tactile pattern, at its own rate or resampled (``rate``);
 - stereo: the friction sound on the left, the tactile pattern on the right, both at the sound's
@@ -10,19 +10,41 @@ file is 1500 ms long. In general the file is the least common multiple of the tw
 samples at the output rate); where that exceeds :data:`MAX_COMMON_S` the export is refused
 rather than cut with a seam.
 
-What it cannot carry: a WAV has no portable loop flag (the file is exactly ``repeats`` periods,
-so a player looping the whole file loops seamlessly); nothing of the coupling of the sound to
-pressure and speed (Eq. 1) — the sound is at its reference level throughout; the pattern's
-components, only their sum.
+The loop. Every file carries a RIFF ``smpl`` chunk declaring the whole file one forward loop
+(frames 0 … last, played forever; see :func:`realpen.io.files.add_smpl_loop`), where samplers,
+game engines and libsndfile (``SFC_GET_INSTRUMENT``) look for loop points. The file is exactly
+``repeats`` periods, so a player that ignores the chunk and loops the whole file loops
+seamlessly too.
+
+Sample format (``subtype``):
+
+- ``pcm16`` (the default): 16-bit integer PCM, the one WAV every player reads — Android's
+  ``SoundPool`` and ``MediaPlayer``, game engines' importers, the audio path that drives an
+  actuator. Its 96 dB of range is far more than a vibrotactile actuator renders (a few tens
+  of dB above threshold), so the rounding (half a step, 1.5·10⁻⁵ of full scale) is never
+  felt;
+- ``pcm24``: 24-bit integer PCM, for audio tools that keep more;
+- ``float``: 32-bit float, the samples exactly (bit for bit those of the pattern or its
+  resampling), for round trips and analysis; not every player reads it.
+
+Integer samples are rounded here, not by the audio library, so the same samples always give the
+same bytes: code ``round(x·2ᵇ⁻¹)`` clipped to ``−2ᵇ⁻¹ … 2ᵇ⁻¹ − 1``, the scale readers divide by
+(libsndfile, soundfile, most engines), so a sample reads back within half a step
+(``2⁻ᵇ``), full scale +1 within one.
+
+What it cannot carry: the pattern's components, only their sum; in mono, the sound; the coupling
+of the sound to pressure and speed (Eq. 1) — the sound is at its reference level throughout;
+with ``pcm16``/``pcm24``, the exact samples.
 """
 
 from __future__ import annotations
 
+import io
 import math
 
 import numpy as np
 
-from realpen.errors import RealPenError
+from realpen.errors import ParameterError, RealPenError
 from realpen.exports.base import (
     Export,
     check_frames,
@@ -31,17 +53,25 @@ from realpen.exports.base import (
     resample_loop,
     sound_samples,
 )
-from realpen.io.files import wav_bytes
+from realpen.io.files import add_smpl_loop, wav_bytes
 from realpen.tactile.pattern import TactilePattern
 
-__all__ = ["SUFFIX", "MAX_COMMON_S", "LIMITS", "mono_samples", "stereo_samples", "export"]
+__all__ = ["SUFFIX", "MAX_COMMON_S", "SUBTYPES", "DEFAULT_SUBTYPE", "LIMITS", "mono_samples",
+           "stereo_samples", "encode", "export"]
 
 SUFFIX = ".wav"
 MAX_COMMON_S = 60.0
+SUBTYPES = ("pcm16", "pcm24", "float")
+"""The sample formats of the export (see the module docstring)."""
+DEFAULT_SUBTYPE = "pcm16"
+_BITS = {"pcm16": 16, "pcm24": 24}
 LIMITS = (
-    "no loop flag: the file is whole periods, loop the whole file",
+    "the pattern's components: only their sum",
+    "the sound: this file is the tactile pattern alone (stereo puts the sound on the left)",
     "the sound's coupling to pressure and speed (Eq. 1) is not applied: constant level",
 )
+QUANTISED = ("the exact samples: rounded to {bits} bits (half a step, {step:.1e} of full "
+             "scale); subtype float keeps them")
 
 
 def mono_samples(pattern: TactilePattern, rate: int | None = None, repeats: int = 1,
@@ -97,10 +127,46 @@ def stereo_samples(pattern: TactilePattern, sound, rate: int | None = None, repe
     return np.tile(both, (repeats, 1)).astype(np.float32), int(rate)
 
 
+def check_subtype(subtype: str) -> str:
+    """``subtype`` if it is one of :data:`SUBTYPES`.
+
+    Raises:
+        ParameterError: (parameter ``subtype``) otherwise.
+    """
+    if subtype not in SUBTYPES:
+        raise ParameterError("subtype", f"must be one of {', '.join(SUBTYPES)}, got {subtype!r}")
+    return subtype
+
+
+def encode(samples: np.ndarray, rate: int, subtype: str = DEFAULT_SUBTYPE) -> bytes:
+    """A WAV of ``samples`` (frames, or frames × channels; full scale ±1) at ``rate`` Hz in
+    ``subtype``, with a ``smpl`` chunk declaring the whole file one forward loop.
+
+    The same samples always give the same bytes.
+
+    Raises:
+        ParameterError: an unknown ``subtype``.
+    """
+    subtype = check_subtype(subtype)
+    if subtype == "float":
+        return wav_bytes(samples, rate, loop=True)
+    import soundfile as sf
+
+    scale = 2 ** (_BITS[subtype] - 1)
+    codes = np.clip(np.rint(np.asarray(samples, dtype=np.float64) * scale), -scale, scale - 1)
+    if scale == 2 ** 15:
+        data, written = codes.astype(np.int16), "PCM_16"
+    else:  # libsndfile writes the top 24 bits of 32-bit integers: nothing is rounded there
+        data, written = codes.astype(np.int32) << 8, "PCM_24"
+    buffer = io.BytesIO()
+    sf.write(buffer, data, int(rate), subtype=written, format="WAV")
+    return add_smpl_loop(buffer.getvalue())
+
+
 def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "pattern",
            tool: str = "", version: str | None = None, stereo: bool = False,
-           rate: int | None = None, repeats: int = 1) -> Export:
-    """Render the WAV (32-bit float); see the module docstring.
+           rate: int | None = None, repeats: int = 1, subtype: str = DEFAULT_SUBTYPE) -> Export:
+    """Render the WAV, with its ``smpl`` loop; see the module docstring.
 
     Args:
         pattern: the tactile pattern.
@@ -110,14 +176,25 @@ def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "p
         stereo: sound left, tactile right.
         rate: output rate in Hz (default: the pattern's, or with ``stereo`` the sound's).
         repeats: periods written.
+        subtype: ``pcm16`` (default), ``pcm24`` or ``float`` (:data:`SUBTYPES`).
+
+    Raises:
+        ParameterError: an unknown ``subtype`` (before anything is rendered), a bad ``rate`` or
+            ``repeats``, or no sound with ``stereo``.
     """
+    subtype = check_subtype(subtype)
     if stereo:
         samples, out_rate = stereo_samples(pattern, sound, rate, repeats, name)
     else:
         samples, out_rate = mono_samples(pattern, rate, repeats, name)
     seconds = len(samples) / out_rate
     layout = "sound left, tactile right" if stereo else "tactile pattern, mono"
-    limits = LIMITS if stereo else LIMITS[:1]
-    return Export(wav_bytes(samples, out_rate),
-                  f"{layout}, {seconds * 1000:.0f} ms at {out_rate} Hz, loops seamlessly",
+    limits = (LIMITS[0], LIMITS[2]) if stereo else LIMITS[:2]
+    if subtype in _BITS:
+        bits = _BITS[subtype]
+        limits += (QUANTISED.format(bits=bits, step=2.0 ** -bits),)
+    kind = "32-bit float" if subtype == "float" else f"{_BITS[subtype]}-bit PCM"
+    return Export(encode(samples, out_rate, subtype),
+                  f"{layout}, {kind}, {seconds * 1000:.0f} ms at {out_rate} Hz, smpl loop over "
+                  f"the whole file (loops seamlessly)",
                   limits=limits)
