@@ -392,6 +392,15 @@ CORPUS = [
     bad("sound-fit-garbage-base", f"{FIT} --base garbage.json", "garbage.json"),
     bad("sound-fit-deep-base", f"{FIT} --base deep.json", "deep.json"),
     bad("export-garbage-zip", "export garbage.zip -f wav -o p.wav", "garbage.zip"),
+    bad("export-profile-wrong-suffix", "export profile pencil -f wav -o p.mp3", "p.mp3"),
+    bad("export-read-missing", "export read nothere.hjif", "nothere.hjif"),
+    bad("export-read-not-json", "export read bad.ahap --render out.wav", "bad.ahap",
+        setup=lambda work: (work / "bad.ahap").write_text("{not json")),
+    bad("export-read-render-rate", "export read p.haptic --render out.wav --rate 5", "--rate",
+        setup=lambda work: (work / "p.haptic").write_text(
+            '{"version": {"major": 1, "minor": 0, "patch": 0}, "signals": {"continuous": '
+            '{"envelopes": {"amplitude": [{"time": 0, "amplitude": 0.5}, '
+            '{"time": 0.1, "amplitude": 0.5}]}}}}')),
     bad("export-truncated-zip", "export truncated.zip -f wav -o p.wav", "truncated.zip"),
     bad("profile-show-garbage-zip", "profile show garbage.zip", "garbage.zip"),
     bad("profile-show-seam-not-a-number", "profile show badseam", "badseam",

@@ -7,6 +7,7 @@ import io
 import json
 import re
 import shutil
+import struct
 import subprocess
 
 import numpy as np
@@ -18,18 +19,21 @@ from scipy.signal import resample as fft_resample
 from realpen.errors import ParameterError, RealPenError
 from realpen.exports import (
     FORMATS,
+    SUFFIXES,
     ahap,
     android,
     c_header,
     companion_paths,
     export,
     export_profile,
+    format_for_suffix,
     profile_inputs,
     render,
     wav,
 )
 from realpen.exports import envelope as env
 from realpen.exports.base import resample_loop
+from realpen.io.files import read_smpl_loop
 from realpen.profile.registry import resolve_profile
 from realpen.tactile.pattern import TactilePattern
 
@@ -149,9 +153,57 @@ def test_wav_mono_is_the_pattern_and_repeats_tile_it(pens):
     profile = pens["pencil"]
     samples, rate = wav.mono_samples(profile.pattern)
     assert rate == 8000 and np.array_equal(samples, profile.tactile)
-    data = render("wav", profile, repeats=3).data
+    data = render("wav", profile, repeats=3, subtype="float").data
     read, rate = sf.read(io.BytesIO(data), dtype="float32")
     assert rate == 8000 and np.array_equal(read, np.tile(profile.tactile, 3))
+
+
+SF_INSTRUMENT = struct.Struct("<i6bxxi" + "iIII" * 16)  # sndfile.h: gain, notes, loops[16]
+SFC_GET_INSTRUMENT, SF_LOOP_FORWARD = 0x10D0, 801
+
+
+def libsndfile_loops(path) -> list[tuple[int, int, int, int]]:
+    """The loops libsndfile itself reads from a file's ``smpl`` chunk (``SFC_GET_INSTRUMENT``):
+    (mode, start, end, count) each, libsndfile's end being exclusive; [] without a chunk."""
+    buffer = sf._ffi.new("char[]", SF_INSTRUMENT.size)
+    with sf.SoundFile(path) as handle:
+        found = sf._snd.sf_command(handle._file, SFC_GET_INSTRUMENT, buffer, SF_INSTRUMENT.size)
+    if not found:
+        return []
+    fields = SF_INSTRUMENT.unpack(bytes(sf._ffi.buffer(buffer)))
+    count = fields[7]
+    return [tuple(fields[8 + 4 * k:12 + 4 * k]) for k in range(count)]
+
+
+@pytest.mark.parametrize("subtype,written,step", [("pcm16", "PCM_16", 2.0 ** -16),
+                                                  ("pcm24", "PCM_24", 2.0 ** -24),
+                                                  ("float", "FLOAT", 0.0)])
+def test_wav_subtypes_carry_the_smpl_loop_libsndfile_reads(tmp_path, pens, subtype, written,
+                                                             step):
+    profile = pens["marker"]
+    out = tmp_path / "marker.wav"
+    export_profile(profile, "wav", out, stereo=True, subtype=subtype)
+    info = sf.info(out)
+    assert (info.subtype, info.frames, info.channels) == (written, 72000, 2)
+    expected, _ = wav.stereo_samples(profile.pattern, profile.sound_loop)
+    read, _ = sf.read(out, dtype="float64")
+    assert np.max(np.abs(read - expected)) <= step
+    assert read_smpl_loop(out) == (0, 71999)
+    assert libsndfile_loops(out) == [(SF_LOOP_FORWARD, 0, 72000, 0)]  # forward, forever
+    assert render("wav", profile, stereo=True, subtype=subtype).data == out.read_bytes()
+
+
+def test_wav_default_is_pcm16_and_bad_subtypes_are_refused(pens):
+    data = render("wav", pens["pencil"], repeats=2).data
+    assert sf.info(io.BytesIO(data)).subtype == "PCM_16"
+    assert read_smpl_loop(data) == (0, 23999)
+    assert not any("loop" in limit for limit in render("wav", pens["pencil"]).limits)
+    with pytest.raises(ParameterError, match=r"^subtype: must be one of pcm16, pcm24, float, "
+                                             r"got 'PCM_16'"):
+        render("wav", pens["pencil"], subtype="PCM_16")
+    from realpen.cli.export_cmds import WAV_SUBTYPES
+
+    assert WAV_SUBTYPES == wav.SUBTYPES
 
 
 def test_resampled_loop_stays_seamless():
@@ -328,10 +380,58 @@ def test_ahap_export_writes_the_sound_it_plays(tmp_path, pens):
     document = json.loads((tmp_path / "pen.ahap").read_text())
     paths = {e["Event"]["EventWaveformPath"] for e in document["Pattern"]
              if e.get("Event", {}).get("EventType") == "AudioCustom"}
-    assert paths == {"pen-sound.wav"} and written.companions == [tmp_path / "pen-sound.wav"]
+    assert paths == {"pen-sound.wav"}
+    assert written.companions == [tmp_path / "pen-sound.wav", tmp_path / "pen.swift"]
+    assert written.companions == companion_paths("ahap", tmp_path / "pen.ahap")
+    player = (tmp_path / "pen.swift").read_text()
+    assert 'Bundle.main.url(forResource: "pen", withExtension: "ahap")' in player
+    assert f"static let cX: Float = {profile.coupling.c_x:.6g}" in player
     sound, rate = sf.read(tmp_path / "pen-sound.wav")
     assert rate == 48000 and len(sound) == len(profile.sound)
     assert np.max(np.abs(sound - profile.sound)) <= 1 / 32768 + 1e-9
+
+
+def test_ahap_limits_are_checked_before_writing(pens):
+    import copy
+
+    made = doc("ahap", pens["pencil"], created="2025-01-01")
+    assert ahap.check_limits(copy.deepcopy(made)) == made
+    assert ahap.pattern_end(made) == pytest.approx(1.5)
+
+    def broken(change):
+        document = copy.deepcopy(made)
+        change(document["Pattern"])
+        return document
+
+    def one_curve(entries):  # the first two intensity curves as one of 31 points
+        curves = [e["ParameterCurve"] for e in entries if "ParameterCurve" in e
+                  and e["ParameterCurve"]["ParameterID"] == "HapticIntensityControl"]
+        shift = curves[1]["Time"] - curves[0]["Time"]
+        curves[0]["ParameterCurveControlPoints"] += [
+            {**point, "Time": point["Time"] + shift}
+            for point in curves[1]["ParameterCurveControlPoints"][1:]]
+
+    def long_event(entries):
+        next(e for e in entries if "Event" in e)["Event"]["EventDuration"] = 31.0
+
+    def late_curve(entries):
+        next(e for e in entries if "ParameterCurve" in e)["ParameterCurve"]["Time"] = 599.99
+
+    def many_sounds(entries):
+        sound = next(e for e in entries if e.get("Event", {}).get("EventType") == "AudioCustom")
+        entries += [copy.deepcopy(sound) for _ in range(ahap.MAX_SOUND_EVENTS)]
+
+    for change, message in (
+            (one_curve, r"^pencil: the HapticIntensityControl curve at 0 s holds 31 control "
+                        r"points; an AHAP parameter curve holds at most 16$"),
+            (long_event, r"^pencil: the continuous event at 0 s lasts 31 s; Core Haptics "
+                         r"plays a continuous event for at most 30 s$"),
+            (late_curve, r"^pencil: the AHAP pattern lasts 600\.1\d* s; an AHAP export holds "
+                         r"at most 600 s$"),
+            (many_sounds, r"^pencil: the AHAP holds 10,005 AudioCustom events; the limit is "
+                          r"10,000$")):
+        with pytest.raises(RealPenError, match=message):
+            ahap.check_limits(broken(change), "pencil")
 
 
 # --- .haptic --------------------------------------------------------------------------------
@@ -370,14 +470,14 @@ def test_haptic_amplitude_matches_the_ahap_intensity_squared(pens):
 @pytest.mark.parametrize("name", PENS)
 def test_android_waveform_steps_follow_the_pattern(pens, name):
     profile = pens[name]
-    document = doc("android", profile, repeats=2)
+    document = doc("android", profile)
     wave = document["waveform"]
     timings, amplitudes = wave["timings_ms"], wave["amplitudes"]
-    assert len(timings) == len(amplitudes) == 300 and wave["repeat"] == 0
-    assert all(isinstance(v, int) and v > 0 for v in timings) and sum(timings) == 3000
+    assert len(timings) == len(amplitudes) == 150 and wave["repeat"] == 0
+    assert all(isinstance(v, int) and v > 0 for v in timings) and sum(timings) == 1500
     assert all(isinstance(v, int) and 0 <= v <= 255 for v in amplitudes) and max(amplitudes) == 255
     centres = (np.cumsum(timings) - np.asarray(timings) / 2) / 1000
-    assert_follows(centres, np.asarray(amplitudes, dtype=float), np.tile(profile.tactile, 2), 8000)
+    assert_follows(centres, np.asarray(amplitudes, dtype=float), profile.tactile, 8000)
 
 
 @pytest.mark.parametrize("name", PENS)
@@ -430,111 +530,129 @@ def test_android_kotlin_snippet_holds_the_arrays(tmp_path, pens):
     assert source.count("(") == source.count(")") and source.count("{") == source.count("}")
 
 
-# --- hjif -----------------------------------------------------------------------------------
-
-def synthesise_hjif(document: dict, frames: int) -> np.ndarray:
-    """Render a .hjif's sine effects: a(τ)·sin(2π f τ / timescale + phase) from each position."""
-    timescale = document["timescale"]
-    out = np.zeros(frames)
-    for effect in document["perceptions"][0]["channels"][0]["bands"][0]["effects"]:
-        keys = effect["keyframes"]
-        positions = np.array([k["relative_position"] for k in keys])
-        tau = np.arange(positions[-1] + 1)
-        level = np.interp(tau, positions, [k["amplitude_modulation"] for k in keys])
-        signal = level * np.sin(2 * np.pi * keys[0]["frequency_modulation"] * tau / timescale
-                                + effect["phase"])
-        where = effect["position"] + tau
-        inside = where < frames
-        out[where[inside]] += signal[inside]
-    return out
-
-
-@pytest.mark.parametrize("name", PENS)
-def test_hjif_has_the_required_fields(pens, name):
-    profile = pens[name]
-    document = doc("hjif", profile)
-    for key in ("version", "profile", "level", "date", "description", "timescale", "avatars",
-                "perceptions", "syncs"):
-        assert key in document
-    assert re.fullmatch(r"[0-9]{4}(-[0-9])?", document["version"])
-    assert int(document["version"][:4]) >= 2023
-    assert document["profile"] in ("Main", "Simple Parametric") and document["level"] in (1, 2)
-    assert re.match(r"[0-9]{4}-[01][0-9]-[0-3][0-9]", document["date"])
-    assert isinstance(document["timescale"], int) and 0 < document["timescale"] <= 48000
-    perception = document["perceptions"][0]
-    for key in ("id", "avatar_id", "description", "perception_modality", "channels",
-                "effect_library"):
-        assert key in perception
-    assert perception["perception_modality"] == "Vibrotactile"
-    channel = perception["channels"][0]
-    for key in ("id", "description", "gain", "mixing_coefficient", "body_part_mask", "bands"):
-        assert key in channel
-    assert channel["reference_device_id"] in [d["id"] for d in perception["reference_devices"]]
-    assert len(channel["bands"]) <= 7  # level 1
-    band = channel["bands"][0]
-    assert band["band_type"] == "VectorialWave" and "curve_type" not in band
-    assert "block_length" not in band
-    positions = [effect["position"] for effect in band["effects"]]
-    assert sorted_times(positions) and positions[0] == 0
-    frequencies = set()
-    for effect in band["effects"]:
-        assert effect["effect_type"] == "Basis" and effect["base_signal"] == "Sine"
-        assert isinstance(effect["position"], int) and 0 <= effect["phase"] < 2 * np.pi
-        keys = effect["keyframes"]
-        relative = [k["relative_position"] for k in keys]
-        assert relative[0] == 0 and np.all(np.diff(relative) > 0)
-        assert all(isinstance(r, int) for r in relative)
-        assert all(isinstance(k["frequency_modulation"], int) for k in keys)
-        assert all(0 <= k["amplitude_modulation"] <= 1 for k in keys)
-        frequencies.update(k["frequency_modulation"] for k in keys)
-    assert band["lower_frequency_limit"] == min(frequencies)
-    assert band["upper_frequency_limit"] == max(frequencies)
-    components = sum(len(sub) for sub in profile.meta.tactile.subpatterns)
-    assert components <= len(band["effects"]) <= 3 * components  # pieces bound the Hz drift
+def test_android_limits_are_checked_before_writing(tmp_path, pens):
+    pattern = pens["pencil"].pattern
+    with pytest.raises(ParameterError, match=r"^repeats: an Android export holds one period: 2 "
+                                             r"periods need 30 envelope control points, and "
+                                             r"devices guarantee 16"):
+        export("android", tmp_path / "p.json", pattern, repeats=2)
+    short = TactilePattern([pattern.subpatterns[0]], subpattern_ms=30, crossfade_ms=1)
+    with pytest.raises(RealPenError, match=r"^short: the tactile pattern lasts 30 ms; Android "
+                                           r"envelope control points last at least 20 ms"):
+        export("android", tmp_path / "p.json", short, name="short")
+    long = TactilePattern(pattern.subpatterns, subpattern_ms=1000)  # 15 s
+    with pytest.raises(RealPenError, match=r"^long: the tactile pattern lasts 15000 ms; .*at "
+                                           r"most 1000 ms apart .*at most 14000 ms"):
+        export("android", tmp_path / "p.json", long, name="long")
+    assert list(tmp_path.iterdir()) == []
+    shortest = TactilePattern([pattern.subpatterns[0]], subpattern_ms=40, crossfade_ms=1)
+    points = doc("android", shortest)["basic_envelope"]["control_points"]
+    assert [p["duration_ms"] for p in points] == [20, 20, 20]
+    measured = env.Envelope(np.array([0.0, 0.0004, 0.01]), np.ones(2), np.full(2, 100.0))
+    with pytest.raises(RealPenError, match=r"^pen: createWaveform step 0 lasts 0 ms; Android "
+                                           r"needs timings above 0 ms"):
+        android.check_waveform(android.waveform(measured), "pen")
+    envelope = doc("android", pattern)["basic_envelope"]
+    too_many = {"control_points": envelope["control_points"] + envelope["control_points"][:1]}
+    with pytest.raises(RealPenError, match=r"^pen: the Android envelope has 17 control points; "
+                                           r"devices guarantee 16"):
+        android.check_envelope(too_many, "pen")
+    for duration in (19, 1001):
+        bad = {"control_points": [{**envelope["control_points"][0], "duration_ms": duration}]}
+        with pytest.raises(RealPenError, match=rf"^pen: Android envelope control point 0 lasts "
+                                               rf"{duration} ms; devices guarantee 20 … 1000 ms"):
+            android.check_envelope(bad, "pen")
 
 
-@pytest.mark.parametrize("name", PENS)
-def test_hjif_sine_effects_add_up_to_the_pattern(pens, name):
-    profile = pens[name]
-    document = doc("hjif", profile, repeats=2)
-    x = np.tile(profile.tactile.astype(np.float64), 2)
-    y = synthesise_hjif(document, len(x))
-    inner = slice(20, len(x) - 20)  # the wrap crossfade is cut at the file's two ends
-    error = np.sqrt(np.mean((x[inner] - y[inner]) ** 2) / np.mean(x[inner] ** 2))
-    assert error < 0.05, error  # whole-Hz frequencies; the rest of the structure is exact
-    assert np.corrcoef(x[inner], y[inner])[0, 1] > 0.995
+def kotlin_gain(source: str):
+    """The Kotlin ``gain(pressure, speedMmS)`` of an Android export, run as Python: its
+    constants read back from the text and its body translated line by line."""
+    constants = {name: float(value) for name, value in
+                 re.findall(r"const val (\w+) = ([-+0-9.eE]+)f\b", source)}
+    body = re.search(r"fun gain\(pressure: Float, speedMmS: Float\): Float \{\n(.*?)\n    \}",
+                     source, re.S).group(1)
+    lines = []
+    for line in body.strip().splitlines():
+        line = re.sub(r"\b(\d+)f\b", r"\1.0", line.strip())
+        line = re.sub(r"^if \((.*)\) return (.*)$", r"if \1: return \2", line)
+        line = re.sub(r"^val ", "", line)
+        line = re.sub(r"(\w+)\.coerceIn\(([^,]+), ([^)]+)\)", r"min(max(\1, \2), \3)", line)
+        lines.append("    " + line)
+    namespace = dict(constants)
+    exec("def gain(pressure, speedMmS):\n" + "\n".join(lines), namespace)
+    return namespace["gain"], constants
 
 
-@pytest.mark.parametrize("boundary,count,unit_ms", [("hard", 15, 100.0),
-                                                     ("crossfade", 1, 1500.0)])
-def test_hjif_reproduces_other_pattern_layouts(pens, boundary, count, unit_ms):
-    """Hard boundaries, and one 1500 ms sub-pattern (conditions D–F), split into pieces."""
-    base = pens["marker"]
-    subpatterns = base.meta.tactile.subpatterns[:count]
-    pattern = TactilePattern(subpatterns, 8000, unit_ms, boundary, 5.0)
-    x = pattern.samples
-    document = doc("hjif", pattern)
-    effects = document["perceptions"][0]["channels"][0]["bands"][0]["effects"]
-    assert len(effects) > len(subpatterns[0])  # a 1500 ms component is split into pieces
-    y = synthesise_hjif(document, len(x))
-    inner = slice(20, len(x) - 20)
-    error = np.sqrt(np.mean((x[inner] - y[inner]) ** 2) / np.mean(x[inner] ** 2))
-    assert error < 0.05, error
+def test_android_kotlin_applies_the_coupling_as_realpen_does(pens, notebook_pattern):
+    from realpen.motion.coupling import Coupling
+
+    odd = Coupling(c_p=0.7321, c_op=0.05, c_x=0.0173, c_ov=9.5, a_max=1.7)
+    points = [(0.0, 50.0), (0.5, 50.0), (1.0, 200.0), (0.2, 5.0), (0.3, 30.0), (-0.1, 40.0)]
+    for coupling, source in ((odd, render("android", notebook_pattern, coupling=odd,
+                                          kotlin_only=True).data.decode()),
+                             (pens["pencil"].coupling,
+                              render("android", pens["pencil"], kotlin_only=True).data.decode())):
+        gain, constants = kotlin_gain(source)
+        assert constants == {"C_P": coupling.c_p, "C_OP": coupling.c_op, "C_X": coupling.c_x,
+                             "C_OV": coupling.c_ov, "A_MAX": coupling.a_max}
+        for pressure, speed in points:
+            assert gain(pressure, speed) == pytest.approx(
+                float(coupling.gain_raw(pressure, speed)), abs=1e-12), (pressure, speed)
+        assert "fun waveform(pressure: Float, speedMmS: Float): VibrationEffect?" in source
+        assert "val drive = gain(pressure, speedMmS) / A_MAX" in source
+        assert ("if (AMPLITUDES[i] == 0) 0 else (AMPLITUDES[i] * drive).roundToInt()"
+                ".coerceIn(1, 255)") in source
+    # Both ends of the clamp and the lifted pen are among the points.
+    assert {float(odd.gain_raw(p, v)) for p, v in points} >= {0.0, 1.7}
+    plain = render("android", notebook_pattern, kotlin_only=True).data.decode()
+    assert "const val" not in plain and "fun gain(" not in plain and "roundToInt" not in plain
+    assert "fun waveform(): VibrationEffect" in plain
 
 
 # --- export_profile -------------------------------------------------------------------------
 
 def test_export_profile_refuses_unknown_formats_and_options(tmp_path, pens):
-    out = tmp_path / "x.out"
     with pytest.raises(ParameterError, match=r"^fmt: unknown format 'mp3' \(known: wav, "):
-        export_profile(pens["pencil"], "mp3", out)
+        export_profile(pens["pencil"], "mp3", tmp_path / "x.mp3")
     with pytest.raises(ParameterError, match="^stereo: not used by format 'ahap'"):
-        export_profile(pens["pencil"], "ahap", out, stereo=True)
+        export_profile(pens["pencil"], "ahap", tmp_path / "x.ahap", stereo=True)
     with pytest.raises(ParameterError, match="^repeats: not used by format 'c-header'"):
-        export_profile(pens["pencil"], "c-header", out, repeats=2)
+        export_profile(pens["pencil"], "c-header", tmp_path / "x.h", repeats=2)
     with pytest.raises(ParameterError, match="^repeats: must be a whole number"):
-        export_profile(pens["pencil"], "haptic", out, repeats=0)
+        export_profile(pens["pencil"], "haptic", tmp_path / "x.haptic", repeats=0)
+    with pytest.raises(ParameterError, match="^subtype: not used by format 'hjif'"):
+        export_profile(pens["pencil"], "hjif", tmp_path / "x.hjif", subtype="float")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_each_format_is_written_to_its_own_suffix(tmp_path, pens):
+    assert {fmt: SUFFIXES[fmt] for fmt in FORMATS} == {
+        "wav": (".wav",), "c-header": (".h",), "ahap": (".ahap",), "haptic": (".haptic",),
+        "android": (".json", ".kt"), "hjif": (".hjif",)}
+    for fmt, module in FORMATS.items():
+        assert format_for_suffix(f"dir.x/pen{module.SUFFIX.upper()}") == fmt
+    assert format_for_suffix("Pen.kt") == "android"
+    from realpen.cli.export_cmds import _SUFFIXES as help_text  # the numpy-free --output help
+
+    assert all(f"{fmt} {suffixes[0]}" in help_text for fmt, suffixes in SUFFIXES.items())
+    for name, found in (("pen.mp3", "the suffix .mp3"), ("pen", "no suffix")):
+        with pytest.raises(RealPenError, match=rf"^{name}: has {found}; no export format is "
+                                               rf"written to it \(.*wav \.wav, .*android "
+                                               rf"\.json or \.kt, hjif \.hjif\)$"):
+            format_for_suffix(name)
+    out = tmp_path / "p.mp3"
+    with pytest.raises(RealPenError, match=rf"^{re.escape(str(out))}: a wav export is written "
+                                           rf"to a \.wav file, not \.mp3 \(name the file "
+                                           rf"p\.wav"):
+        export_profile(pens["pencil"], "wav", out)
+    with pytest.raises(RealPenError, match=r"an android export is written to a \.json or \.kt "
+                                           r"file, not \.wav"):
+        export("android", tmp_path / "p.wav", pens["pencil"].pattern)
+    with pytest.raises(RealPenError, match=r"a hjif export is written to a \.hjif file, and "
+                                           r"this name has none"):
+        export("hjif", tmp_path / "hjif", pens["pencil"].pattern)
+    assert list(tmp_path.iterdir()) == []
+    assert export("wav", tmp_path / "P.WAV", pens["pencil"].pattern).path.exists()
 
 
 def test_every_format_renders_every_pen(pens):
@@ -561,6 +679,18 @@ def test_cli_exports_each_format(tmp_path, fmt, suffix):
     assert leftovers == []
 
 
+def test_cli_infers_the_format_from_the_suffix(tmp_path):
+    out = tmp_path / "pen.ahap"
+    result = run_cli("export", "pencil", "-o", out)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(out.read_text())["Version"] == 1.0
+    assert (tmp_path / "pen-sound.wav").exists() and "note: ahap cannot carry" in result.stdout
+    wav_out = tmp_path / "pen.wav"
+    result = run_cli("export", "pencil", "-o", wav_out, "--subtype", "pcm24")
+    assert result.returncode == 0, result.stderr
+    assert sf.info(wav_out).subtype == "PCM_24" and read_smpl_loop(wav_out) == (0, 11999)
+
+
 def test_cli_stereo_wav_with_rate_and_repeats(tmp_path):
     out = tmp_path / "stereo.wav"
     result = run_cli("export", "marker", "--format", "wav", "--stereo", "--rate", "44100",
@@ -573,25 +703,40 @@ def test_cli_stereo_wav_with_rate_and_repeats(tmp_path):
 def bad_case(tmp_path, case):
     """Arguments of one bad invocation and the text its message must name."""
     out = tmp_path / "out.file"
+    wav_out = tmp_path / "out.wav"
     if case == "unknown_format":
         return ["export", "pencil", "--format", "mp3", "-o", out], "--format: unknown format 'mp3'"
+    if case == "suffix_not_the_format":
+        return (["export", "pencil", "-f", "wav", "-o", tmp_path / "p.mp3"],
+                f"{tmp_path / 'p.mp3'}: a wav export is written to a .wav file, not .mp3")
+    if case == "suffix_of_no_format":
+        return ["export", "pencil", "-o", out], f"{out}: has the suffix .file; no export format"
+    if case == "unknown_subtype":
+        return ["export", "pencil", "--subtype", "pcm8", "-o", wav_out], "--subtype"
     if case == "no_such_profile":
-        return ["export", "quill", "--format", "wav", "-o", out], "quill: no such profile"
+        return ["export", "quill", "--format", "wav", "-o", wav_out], "quill: no such profile"
     if case == "broken_bundle":
         bundle = tmp_path / "broken"
         bundle.mkdir()
         (bundle / "profile.json").write_text("{")
-        return ["export", bundle, "--format", "wav", "-o", out], "broken"
+        return ["export", bundle, "--format", "wav", "-o", wav_out], "broken"
     if case == "stereo_not_wav":
-        return ["export", "pencil", "--format", "ahap", "--stereo", "-o", out], "--stereo"
+        return (["export", "pencil", "--format", "ahap", "--stereo", "-o", tmp_path / "o.ahap"],
+                "--stereo")
     if case == "rate_zero":
-        return ["export", "pencil", "--format", "c-header", "--rate", "0", "-o", out], "--rate"
+        return (["export", "pencil", "--format", "c-header", "--rate", "0", "-o",
+                 tmp_path / "o.h"], "--rate")
     if case == "rate_breaks_loop":
-        return ["export", "pencil", "--format", "wav", "--rate", "44101", "-o", out], "--rate"
+        return ["export", "pencil", "--format", "wav", "--rate", "44101", "-o", wav_out], "--rate"
     if case == "rate_not_used":
-        return ["export", "pencil", "--format", "hjif", "--rate", "8000", "-o", out], "--rate"
+        return (["export", "pencil", "--format", "hjif", "--rate", "8000", "-o",
+                 tmp_path / "o.hjif"], "--rate")
     if case == "repeats_zero":
-        return ["export", "pencil", "--format", "haptic", "--repeats", "0", "-o", out], "--repeats"
+        return (["export", "pencil", "--format", "haptic", "--repeats", "0", "-o",
+                 tmp_path / "o.haptic"], "--repeats")
+    if case == "android_repeats":
+        return (["export", "pencil", "--repeats", "2", "-o", tmp_path / "o.json"],
+                "--repeats: an Android export holds one period")
     if case == "output_is_folder":
         return ["export", "pencil", "--format", "wav", "-o", tmp_path], str(tmp_path)
     if case == "parent_is_file":
@@ -601,10 +746,11 @@ def bad_case(tmp_path, case):
     raise AssertionError(case)
 
 
-@pytest.mark.parametrize("case", ["unknown_format", "no_such_profile", "broken_bundle",
-                                  "stereo_not_wav", "rate_zero", "rate_breaks_loop",
-                                  "rate_not_used", "repeats_zero", "output_is_folder",
-                                  "parent_is_file"])
+@pytest.mark.parametrize("case", ["unknown_format", "suffix_not_the_format",
+                                  "suffix_of_no_format", "unknown_subtype", "no_such_profile",
+                                  "broken_bundle", "stereo_not_wav", "rate_zero",
+                                  "rate_breaks_loop", "rate_not_used", "repeats_zero",
+                                  "android_repeats", "output_is_folder", "parent_is_file"])
 def test_cli_bad_input_fails_cleanly_and_writes_nothing(tmp_path, case):
     args, names = bad_case(tmp_path, case)
     before = {p.name for p in tmp_path.iterdir()}
@@ -666,8 +812,9 @@ def test_a_pattern_with_a_sound_loop_and_coupling(tmp_path, notebook_pattern, pe
     t = np.arange(14400) / 48000
     loop = SimpleLoop(0.1 * np.sin(2 * np.pi * 1000 * t), 48000)
     written = export("ahap", tmp_path / "nb.ahap", notebook_pattern, sound=loop, name="nb")
+    # Without a coupling there is no Swift player: only the sound of a profile's two companions.
     assert written.companions == [tmp_path / "nb-sound.wav"]
-    assert companion_paths("ahap", tmp_path / "nb.ahap") == written.companions
+    assert companion_paths("ahap", tmp_path / "nb.ahap")[:1] == written.companions
     assert companion_paths("hjif", tmp_path / "nb.hjif") == []
     sound, rate = sf.read(tmp_path / "nb-sound.wav")
     assert rate == 48000 and np.max(np.abs(sound - loop.samples)) <= 1 / 32768 + 1e-9
@@ -694,7 +841,8 @@ def test_a_pattern_with_a_sound_loop_and_coupling(tmp_path, notebook_pattern, pe
 
 def test_export_repr_is_one_line(pens):
     text = repr(render("ahap", pens["pencil"]))
-    assert text.startswith("Export(") and "companions ['pencil-sound.wav']" in text
+    assert text.startswith("Export(")
+    assert "companions ['pencil-sound.wav', 'pencil.swift']" in text
     assert len(text) < 200 and "\n" not in text
 
 

@@ -9,10 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import soundfile as sf
 
 import realpen as rp
 from realpen.errors import RealPenError
-from realpen.exports import export
+from realpen.exports import export, reading
 from realpen.exports.haptic_rules import check_haptic
 from realpen.exports.readers import carrier
 from realpen.exports.reading import frame_rms, load_haptic
@@ -251,3 +252,26 @@ def test_check_haptic_returns_the_document():
         "amplitude": [{"time": 0, "amplitude": 0.1, "emphasis": {"amplitude": 0.1,
                                                                   "frequency": 0}}]}}}}
     assert check_haptic(document, "x.haptic") is document
+
+
+def test_realpen_export_read_renders_every_format(tmp_path):
+    """`realpen export PROFILE -o FILE` then `realpen export read FILE --render`: for each
+    format the rendered WAV lasts the pattern and follows its envelope."""
+    from conftest import run_cli
+
+    profile = rp.load_profile("marker")
+    own = reading.frame_rms(profile.pattern.samples, profile.pattern.rate)
+    for suffix in (".hjif", ".haptic", ".ahap", ".json"):
+        out = tmp_path / f"marker{suffix}"
+        assert run_cli("export", "marker", "-o", out).returncode == 0
+        wav = tmp_path / f"marker{suffix}.wav"
+        result = run_cli("export", "read", out, "--render", wav, "--rate", "8000")
+        assert result.returncode == 0, result.stderr
+        assert result.stdout.startswith(f"{out}: {reading.format_of_file(out)}, 1500 ms: ")
+        assert f"wrote {wav}: 12000 samples at 8000 Hz" in result.stdout
+        samples, rate = sf.read(wav)
+        assert rate == 8000 and len(samples) == 12000
+        r = np.corrcoef(reading.frame_rms(samples, rate), own)[0, 1]
+        assert r > 0.95, (suffix, r)
+    again = run_cli("export", "read", out, "--render", wav)
+    assert again.returncode == 2 and "--force" in again.stderr

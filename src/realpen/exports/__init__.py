@@ -15,9 +15,16 @@ come from, and what the format cannot carry, and defines ``SUFFIX``, ``LIMITS`` 
 Formats that need the sound (``wav`` with ``stereo=True``; ``ahap`` with
 ``sound_events=True``) refuse to go without it, naming ``sound``.
 
-Looping: the tactile pattern (1500 ms) loops while the pen moves. WAV, C header and Android's
-``createWaveform`` carry the loop; AHAP, ``.haptic``, ``.hjif`` and the Android envelopes have
-no loop flag, so they hold one period (or ``repeats`` periods) and loop at playback.
+File names: each format is written to a file with its suffix (:data:`SUFFIXES`: ``.wav``,
+``.h``, ``.ahap``, ``.haptic``, ``.json`` or ``.kt`` for ``android``, ``.hjif``; any case).
+:func:`export` refuses a path with another suffix — a WAV named ``x.mp3`` would be opened as
+MP3 by whoever receives it —, and :func:`format_for_suffix` names the format a path asks for
+(the command line infers ``--format`` with it).
+
+Looping: the tactile pattern (1500 ms) loops while the pen moves. WAV (its ``smpl`` chunk and
+whole periods), C header and Android's ``createWaveform`` carry the loop; AHAP, ``.haptic``,
+``.hjif`` and the Android envelopes have no loop flag, so they hold one period (or ``repeats``
+periods) and loop at playback.
 
 May import (the ``layers`` contract of ``[tool.importlinter]`` in ``pyproject.toml``, checked by
 ``lint-imports``): :mod:`realpen.sound`, :mod:`realpen.tactile`, :mod:`realpen.motion`,
@@ -41,23 +48,33 @@ from realpen.exports import ahap, android, c_header, haptic, hjif, wav
 from realpen.exports.base import Export
 from realpen.io.files import atomic_path
 
-__all__ = ["FORMATS", "Export", "Written", "format_names", "profile_inputs", "companion_paths",
-           "render", "export", "export_profile"]
+__all__ = ["FORMATS", "SUFFIXES", "Export", "Written", "format_names", "format_for_suffix",
+           "check_suffix", "profile_inputs", "companion_paths", "render", "export",
+           "export_profile"]
 
 _MODULES = (wav, c_header, ahap, haptic, android, hjif)
 FORMATS: dict[str, ModuleType] = dict(zip(EXPORT_FORMATS, _MODULES))
 """Format name (:data:`realpen.defaults.EXPORT_FORMATS`, in that order) → its module."""
+SUFFIXES: dict[str, tuple[str, ...]] = {
+    name: (module.SUFFIX, android.KOTLIN_SUFFIX) if module is android else (module.SUFFIX,)
+    for name, module in FORMATS.items()}
+"""Format name → the file suffixes it is written to (lower case; the first is the usual one)."""
 
 
 def _ahap_path_options(path: Path) -> dict:
-    return {"sound_file": f"{path.stem}-sound.wav"}
+    return {"sound_file": f"{path.stem}-sound.wav", "ahap_file": path.name}
+
+
+def _c_header_path_options(path: Path) -> dict:
+    return {"header_file": path.name}
 
 
 def _android_path_options(path: Path) -> dict:
     return {"kotlin_only": path.suffix.lower() == android.KOTLIN_SUFFIX}
 
 
-_PATH_OPTIONS = {"ahap": _ahap_path_options, "android": _android_path_options}
+_PATH_OPTIONS = {"ahap": _ahap_path_options, "android": _android_path_options,
+                 "c-header": _c_header_path_options}
 
 
 @dataclass
@@ -74,6 +91,48 @@ def format_names() -> str:
     return ", ".join(FORMATS)
 
 
+def _suffix_list() -> str:
+    return ", ".join(f"{name} {' or '.join(suffixes)}" for name, suffixes in SUFFIXES.items())
+
+
+def format_for_suffix(path: str | os.PathLike) -> str:
+    """The format a file name asks for, by its suffix (any case): ``pen.ahap`` → ``"ahap"``,
+    ``Pen.kt`` → ``"android"``.
+
+    Raises:
+        RealPenError: one line naming the path, when no format is written to its suffix.
+
+    Example:
+        >>> format_for_suffix("pencil.WAV"), format_for_suffix("pencil.json")
+        ('wav', 'android')
+    """
+    suffix = Path(path).suffix.lower()
+    for name, suffixes in SUFFIXES.items():
+        if suffix in suffixes:
+            return name
+    what = f"the suffix {suffix}" if suffix else "no suffix"
+    raise fail(path, f"has {what}; no export format is written to it (name the file for its "
+                     f"format: {_suffix_list()})")
+
+
+def check_suffix(fmt: str, path: str | os.PathLike) -> None:
+    """Refuse to write format ``fmt`` to a file whose suffix (any case) is not the format's.
+
+    Raises:
+        ParameterError: an unknown ``fmt``.
+        RealPenError: one line naming the path, the format and the suffix it is written to.
+    """
+    _module(fmt)
+    suffix = Path(path).suffix.lower()
+    if suffix not in SUFFIXES[fmt]:
+        expected = " or ".join(SUFFIXES[fmt])
+        found = f"not {suffix}" if suffix else "and this name has none"
+        article = "an" if fmt[0] in "aeiou" else "a"
+        raise fail(path, f"{article} {fmt} export is written to a {expected} file, {found} "
+                         f"(name the file {Path(path).stem}{SUFFIXES[fmt][0]}, or choose the "
+                         f"format its suffix names)")
+
+
 def profile_inputs(profile) -> dict:
     """The export inputs of a pen profile: ``pattern``, ``sound`` (its loop), ``coupling``,
     ``name``, ``tool`` and ``version`` (the profile's content version)."""
@@ -84,7 +143,8 @@ def profile_inputs(profile) -> dict:
 
 def companion_paths(fmt: str, out_path: str | os.PathLike) -> list[Path]:
     """The files :func:`export` writes beside ``out_path`` for a pen profile (which has a
-    sound): for ``ahap`` the sound it plays, ``<stem>-sound.wav``; none for the others.
+    sound and a coupling): for ``ahap`` the sound it plays, ``<stem>-sound.wav``, and its Swift
+    player, ``<stem>.swift``; none for the others.
 
     Raises:
         ParameterError: an unknown ``fmt``.
@@ -92,7 +152,8 @@ def companion_paths(fmt: str, out_path: str | os.PathLike) -> list[Path]:
     _module(fmt)
     out = Path(out_path)
     if fmt == "ahap":
-        return [out.with_name(_ahap_path_options(out)["sound_file"])]
+        return [out.with_name(_ahap_path_options(out)["sound_file"]),
+                out.with_name(f"{out.stem}.swift")]
     return []
 
 
@@ -118,7 +179,8 @@ def render(fmt: str, pattern, sound=None, coupling=None, **options) -> Export:
             JSON copies them, the other formats cannot carry them.
         options: ``name``, ``tool``, ``version`` (labels; default ``"pattern"``, none, the
             pattern's version) and the format's own options, e.g. ``stereo=True``,
-            ``rate=44100`` (Hz), ``repeats=2``. ``None`` means "not given".
+            ``rate=44100`` (Hz), ``repeats=2``, ``subtype="float"``. ``None`` means "not
+            given".
 
     Returns:
         The :class:`~realpen.exports.base.Export`: bytes, summary, companion files, limits.
@@ -175,11 +237,13 @@ def export(fmt: str, out_path: str | os.PathLike, pattern, sound=None, coupling=
 
     Raises:
         ParameterError: as :func:`render`.
-        RealPenError: an output path that cannot be written, naming it.
+        RealPenError: an output path that cannot be written, or whose suffix is not the
+            format's (:func:`check_suffix`), naming it.
     """
     out = Path(out_path)
     if out.is_dir():
         raise fail(out, "is a folder; give the file to write")
+    check_suffix(fmt, out)
     if fmt in _PATH_OPTIONS:
         for name, value in _PATH_OPTIONS[fmt](out).items():
             if options.get(name) is None:
@@ -203,7 +267,8 @@ def export_profile(profile, fmt: str, out_path: str | os.PathLike, **options) ->
     Args:
         profile: a loaded profile (see :func:`realpen.profile.registry.resolve_profile`).
         fmt: one of :data:`FORMATS`.
-        out_path: the file to write.
-        options: format options, e.g. ``stereo=True``, ``rate=44100`` (Hz), ``repeats=2``.
+        out_path: the file to write, with the format's suffix (:data:`SUFFIXES`).
+        options: format options, e.g. ``stereo=True``, ``rate=44100`` (Hz), ``repeats=2``,
+            ``subtype="float"``.
     """
     return export(fmt, out_path, profile, **options)

@@ -21,12 +21,29 @@ first curve, a bug later fixed in other converters such as haptify). Each curve 
 curves at 16 points; I found no Apple statement of the limit, so this keeps to the safe side.
 Pattern entries are sorted by time.
 
+Limits, checked on the finished document before anything is written (:func:`check_limits`),
+each refusal one line naming the limit — on the phone, Core Haptics would clamp or drop
+silently:
+
+- :data:`MAX_CURVE_POINTS` control points per parameter curve (Lofelt's converter);
+- :data:`MAX_EVENT_S` per continuous event (Apple, ``CHHapticEvent.duration``: "The maximum
+  duration of a continuous haptic event is 30 seconds");
+- :data:`MAX_PATTERN_S` for the whole pattern: Apple publishes no limit and the converters
+  (Lofelt's, Meta's haptics SDK) enforce none, so this is the limit of every RealPen export
+  (:data:`~realpen.exports.base.MAX_EXPORT_S`, ten minutes: 60 000 control points per
+  parameter at one per 10 ms frame);
+- :data:`MAX_SOUND_EVENTS` ``AudioCustom`` events (RealPen's bound, also checked before the
+  events are made).
+
 What it cannot carry: the superposed components — the engine plays one waveform whose
 intensity and sharpness follow the pattern's RMS and centroid; a loop flag — the file holds
 ``repeats`` periods (loop at playback with ``CHHapticAdvancedPatternPlayer.loopEnabled`` and
 ``loopEnd`` = the period); a sample-accurate seam between sound units (each unit is its own
 event; Apple: custom waveforms "behave like transient events, with no looping"); the coupling
-of the sound to pressure and speed (Eq. 1), which the app does with dynamic parameters.
+of the feedback to pressure and speed (Eq. 1), which the app applies with dynamic parameters:
+with a coupling, the export writes beside the AHAP a Swift player, ``<stem>.swift``
+(:func:`realpen.exports.snippets.swift_player`), that loops it and sends
+``hapticIntensityControl`` from the pen's pressure and speed.
 """
 
 from __future__ import annotations
@@ -42,6 +59,7 @@ from realpen._version import __version__
 from realpen.errors import ParameterError, fail
 from realpen.exports import envelope as env
 from realpen.exports.base import (
+    MAX_EXPORT_S,
     RESIDUAL_IN_ENVELOPE,
     Export,
     check_pattern,
@@ -49,14 +67,20 @@ from realpen.exports.base import (
     residual_limits,
     sound_samples,
 )
+from realpen.exports.snippets import swift_player
 from realpen.tactile.pattern import TactilePattern
 
-__all__ = ["SUFFIX", "MAX_CURVE_POINTS", "MAX_EVENT_S", "MAX_SOUND_EVENTS", "LIMITS", "build",
-           "sound_wav", "export"]
+__all__ = ["SUFFIX", "MAX_CURVE_POINTS", "MAX_EVENT_S", "MAX_PATTERN_S", "MAX_SOUND_EVENTS",
+           "LIMITS", "build", "check_limits", "pattern_end", "sound_wav", "export"]
 
 SUFFIX = ".ahap"
 MAX_CURVE_POINTS = 16
+"""The most control points one ``ParameterCurve`` holds (Lofelt's converter splits at 16)."""
 MAX_EVENT_S = 30.0
+"""The longest continuous event in s (Apple: "The maximum duration of a continuous haptic
+event is 30 seconds")."""
+MAX_PATTERN_S = MAX_EXPORT_S
+"""The longest pattern in s: no published limit; RealPen's for every export (ten minutes)."""
 MAX_SOUND_EVENTS = 10_000
 """The most ``AudioCustom`` events one AHAP holds, one per sound unit: 2000 units of the
 method's 300 ms fill the longest export (:data:`~realpen.exports.base.MAX_EXPORT_S`)."""
@@ -130,6 +154,7 @@ def build(pattern: TactilePattern, sound=None, *, repeats: int = 1,
 
     Raises:
         ParameterError: ``sound_events=True`` without a sound, or a bad ``repeats``.
+        RealPenError: a limit of :func:`check_limits` broken.
     """
     pattern = check_pattern(pattern)
     repeats = check_span(pattern, repeats, name)
@@ -150,7 +175,7 @@ def build(pattern: TactilePattern, sound=None, *, repeats: int = 1,
         entries += _sounds(len(loop) / rate, total, sound_file or f"{name}-sound.wav")
     entries.sort(key=lambda entry: next(iter(entry.values()))["Time"])
     what = f"{tool}: " if tool else ""
-    return {
+    return check_limits({
         "Version": 1.0,
         "Metadata": {"Project": f"RealPen {name}",
                      "Created": created or _dt.date.today().isoformat(),
@@ -158,7 +183,59 @@ def build(pattern: TactilePattern, sound=None, *, repeats: int = 1,
                                     f"({repeats} × {measured.period_s * 1000:g} ms), RealPen "
                                     f"{__version__}, version {version or pattern.version}"},
         "Pattern": entries,
-    }
+    }, name)
+
+
+def pattern_end(document: dict) -> float:
+    """Where an AHAP document's pattern ends, in s: the latest end of a continuous event, of a
+    parameter curve's last control point, or the start of any other event."""
+    end = 0.0
+    for entry in document["Pattern"]:
+        if "Event" in entry:
+            event = entry["Event"]
+            end = max(end, event["Time"] + event.get("EventDuration", 0.0))
+        elif "ParameterCurve" in entry:
+            curve = entry["ParameterCurve"]
+            points = curve["ParameterCurveControlPoints"]
+            end = max(end, curve["Time"] + (points[-1]["Time"] if points else 0.0))
+    return end
+
+
+def check_limits(document: dict, name: str = "pattern") -> dict:
+    """``document`` if it keeps the AHAP limits of the module docstring.
+
+    Args:
+        document: an AHAP document (as :func:`build` makes it).
+        name: names the pen in an error.
+
+    Raises:
+        RealPenError: one line naming the limit broken and where: a parameter curve of more
+            than :data:`MAX_CURVE_POINTS` control points, a continuous event longer than
+            :data:`MAX_EVENT_S`, a pattern longer than :data:`MAX_PATTERN_S`, or more than
+            :data:`MAX_SOUND_EVENTS` ``AudioCustom`` events.
+    """
+    audio = 0
+    for entry in document["Pattern"]:
+        curve = entry.get("ParameterCurve")
+        if curve is not None and len(curve["ParameterCurveControlPoints"]) > MAX_CURVE_POINTS:
+            raise fail(name, f"the {curve['ParameterID']} curve at {curve['Time']:g} s holds "
+                             f"{len(curve['ParameterCurveControlPoints'])} control points; an "
+                             f"AHAP parameter curve holds at most {MAX_CURVE_POINTS}")
+        event = entry.get("Event", {})
+        if event.get("EventType") == "HapticContinuous" \
+                and event["EventDuration"] > MAX_EVENT_S + 1e-9:
+            raise fail(name, f"the continuous event at {event['Time']:g} s lasts "
+                             f"{event['EventDuration']:g} s; Core Haptics plays a continuous "
+                             f"event for at most {MAX_EVENT_S:g} s")
+        audio += event.get("EventType") == "AudioCustom"
+    end = pattern_end(document)
+    if end > MAX_PATTERN_S + 1e-9:
+        raise fail(name, f"the AHAP pattern lasts {end:g} s; an AHAP export holds at most "
+                         f"{MAX_PATTERN_S:g} s")
+    if audio > MAX_SOUND_EVENTS:
+        raise fail(name, f"the AHAP holds {audio:,} AudioCustom events; the limit is "
+                         f"{MAX_SOUND_EVENTS:,}")
+    return document
 
 
 def sound_wav(sound) -> bytes:
@@ -174,11 +251,14 @@ def sound_wav(sound) -> bytes:
 def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "pattern",
            tool: str = "", version: str | None = None, repeats: int = 1,
            sound_events: bool | None = None, sound_file: str | None = None,
-           created: str | None = None) -> Export:
-    """Render the AHAP (and the sound WAV it refers to); see the module docstring and
-    :func:`build` for the options.
+           created: str | None = None, ahap_file: str | None = None) -> Export:
+    """Render the AHAP, the sound WAV it refers to, and, when ``coupling`` is given, the Swift
+    player (:func:`realpen.exports.snippets.swift_player`) that loops it with its intensity
+    following Eq. 1; see the module docstring and :func:`build` for the options.
 
-    ``coupling`` is not carried (the app applies Eq. 1 with dynamic parameters).
+    Args:
+        ahap_file: the AHAP's file name, which the Swift player loads (default
+            ``<name>.ahap``); the player is written as ``<its stem>.swift``.
     """
     file_name = sound_file or f"{name}-sound.wav"
     document = build(pattern, sound, repeats=repeats, sound_events=sound_events,
@@ -193,5 +273,12 @@ def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "p
                + (f", {audio} AudioCustom events playing {file_name}" if audio else ""))
     limits = (LIMITS if audio else (*LIMITS[:2], NO_SOUND)) \
         + residual_limits(pattern, RESIDUAL_IN_ENVELOPE)
+    companions = {file_name: sound_wav(sound)} if audio else {}
+    if coupling is not None:
+        ahap_name = ahap_file or f"{name}{SUFFIX}"
+        period = pattern.frames / pattern.rate
+        source = swift_player(name, coupling, period, ahap_name)
+        companions[f"{ahap_name.rpartition('.')[0] or ahap_name}.swift"] = source.encode("utf-8")
+        summary += ", a Swift player applying Eq. 1"
     return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
-                  summary, {file_name: sound_wav(sound)} if audio else {}, limits)
+                  summary, companions, limits)

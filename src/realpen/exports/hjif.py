@@ -6,37 +6,42 @@ every sub-pattern becomes a ``Basis`` effect with ``base_signal`` ``"Sine"`` in 
 keyframes that reproduce the crossfades between sub-patterns (linear or equal-power ramps approximated by
 five linear keyframes). Summing the effects gives back the tactile pattern.
 
-Field names and constraints follow the MPEG reference software (MPEGGroup/
-HapticReferenceSoftware, ``IOJson.cpp`` loader and its conformance checks), newest version
-found:
+Every file is valid under MPEG's published JSON schemas (github.com/MPEGGroup/
+HapticJSONSchemas, draft-04; ``tests/test_hjif.py`` checks each bundled pen against them), and
+the field names follow the MPEG reference software (MPEGGroup/HapticReferenceSoftware):
 
-- top level: ``version`` ("YYYY" or "YYYY-N", year ≥ 2023; its writer defaults to "2023"),
-  ``profile`` ("Main" or "Simple Parametric"), ``level`` (1 or 2), ``date`` (ISO 8601),
-  ``description``, ``timescale`` (ticks per second; Main ≤ 48000), ``avatars``,
-  ``perceptions``, ``syncs``;
+- top level: ``version`` "2023", ``profile`` "Main", ``level`` 1, ``date`` (an RFC 3339
+  date-time, the schema's ``date-time`` format: :func:`creation_date`), ``description``,
+  ``timescale`` (ticks per second; Main ≤ 48000), ``avatars``, ``perceptions``, ``syncs``;
 - perception: ``id``, ``avatar_id`` (0: unspecified), ``description``,
-  ``perception_modality`` ("Vibrotactile"), ``effect_library``, ``channels``, optional
-  ``reference_devices``;
+  ``perception_modality`` "Vibrotactile", ``effect_library``, ``channels`` and one
+  ``reference_devices`` entry, the pattern's actuator, with id :data:`REFERENCE_DEVICE_ID` (1:
+  the schema's ids start at 1 and the reference software's conformance check rejects 0) and
+  its ``type`` (:func:`device_type`);
 - channel: ``id``, ``description``, ``gain``, ``mixing_coefficient``, ``body_part_mask``,
-  ``bands`` (level 1: at most 7);
-- band: ``band_type``, ``lower_frequency_limit`` and ``upper_frequency_limit`` (integers, Hz),
-  ``effects``; ``curve_type`` only on Curve bands, ``block_length`` only on WaveletWave bands;
-- effect: ``effect_type`` "Basis", ``position`` (ticks), ``phase`` (rad), ``base_signal``,
-  ``keyframes`` of {``relative_position`` (ticks), ``amplitude_modulation``,
-  ``frequency_modulation`` (integer Hz)}.
+  ``reference_device_id``, ``bands`` (level 1: at most 7);
+- band: ``band_type`` "VectorialWave", ``lower_frequency_limit`` and
+  ``upper_frequency_limit`` (Hz), ``effects``;
+- effect: ``effect_type`` "Basis", ``position`` (ticks), ``phase`` (rad, 0 … 6.28318),
+  ``base_signal`` "Sine", ``keyframes`` of {``relative_position`` (ticks),
+  ``amplitude_modulation``}, the first also carrying ``frequency_modulation`` (whole Hz).
 
-Older drafts and the reference software's earlier versions differ: band type "Wave" with
-``encoding_modality`` and ``window_length``, channels called ``tracks`` with
-``mixing_weight``, no ``timescale``/``profile``/``level``/``syncs``. I could not read the
-published standard itself; this follows the newest reference code.
+Frequency once per effect, by measurement. The reference renderer advances an effect's phase
+between two frequency keyframes as if their positions were milliseconds, whatever the
+timescale. A file with the frequency on every keyframe at timescale 8000 therefore plays
+wrongly there (correlation 0.45 with RealPen's render); with the frequency on each effect's
+first keyframe only, the reference renderer and RealPen's reader
+(:mod:`realpen.exports.readers.hjif`) both give the pattern back at 46–49 dB MPEG PSNR
+(``benchmarks/hjif_reference_render.py`` runs the reference Synthesizer; docs/exports.md has
+the figures).
 
 The timescale is the pattern's rate (8000 ticks/s for bundled pens; at most 48000), so
 positions fall on samples. Phases follow RealPen's synthesis, ``a·sin(2πf·t + φ)`` with t from
-the effect's position; I found no statement of the standard's phase origin.
+the effect's position, as the reference renderer plays them.
 
-An effect is taken to sound from its position through its last keyframe; pieces of one
-component (below) and effects of consecutive hard-bounded sub-patterns therefore end one tick
-before the next begins.
+An effect is taken to sound from its position through its last keyframe (as the reference
+renderer plays it); pieces of one component (below) and effects of consecutive hard-bounded
+sub-patterns therefore end one tick before the next begins.
 
 What it cannot carry: the residual noise of a ``sines+residual`` pattern (the file holds its
 sines; the export says so in its limits); frequencies finer than 1 Hz (``frequency_modulation`` is an integer;
