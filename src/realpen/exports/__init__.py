@@ -46,6 +46,7 @@ from realpen.defaults import EXPORT_FORMATS
 from realpen.errors import ParameterError, fail
 from realpen.exports import ahap, android, c_header, haptic, hjif, wav
 from realpen.exports.base import Export
+from realpen.exports.snippets import unity_script_name
 from realpen.io.files import atomic_path
 
 __all__ = ["FORMATS", "SUFFIXES", "Export", "Written", "format_names", "format_for_suffix",
@@ -69,12 +70,16 @@ def _c_header_path_options(path: Path) -> dict:
     return {"header_file": path.name}
 
 
+def _haptic_path_options(path: Path) -> dict:
+    return {"haptic_file": path.name}
+
+
 def _android_path_options(path: Path) -> dict:
     return {"kotlin_only": path.suffix.lower() == android.KOTLIN_SUFFIX}
 
 
 _PATH_OPTIONS = {"ahap": _ahap_path_options, "android": _android_path_options,
-                 "c-header": _c_header_path_options}
+                 "c-header": _c_header_path_options, "haptic": _haptic_path_options}
 
 
 @dataclass
@@ -144,7 +149,8 @@ def profile_inputs(profile) -> dict:
 def companion_paths(fmt: str, out_path: str | os.PathLike) -> list[Path]:
     """The files :func:`export` writes beside ``out_path`` for a pen profile (which has a
     sound and a coupling): for ``ahap`` the sound it plays, ``<stem>-sound.wav``, and its Swift
-    player, ``<stem>.swift``; none for the others.
+    player, ``<stem>.swift``; for ``haptic`` its Unity script
+    (:func:`realpen.exports.snippets.unity_script_name`); none for the others.
 
     Raises:
         ParameterError: an unknown ``fmt``.
@@ -154,6 +160,8 @@ def companion_paths(fmt: str, out_path: str | os.PathLike) -> list[Path]:
     if fmt == "ahap":
         return [out.with_name(_ahap_path_options(out)["sound_file"]),
                 out.with_name(f"{out.stem}.swift")]
+    if fmt == "haptic":
+        return [out.with_name(unity_script_name(out.name))]
     return []
 
 

@@ -26,6 +26,7 @@ from realpen._version import __version__
 from realpen.exports import envelope as env
 from realpen.exports.base import RESIDUAL_IN_ENVELOPE, Export, check_pattern, check_span, residual_limits
 from realpen.exports.haptic_rules import check_haptic
+from realpen.exports.snippets import unity_player, unity_script_name
 from realpen.tactile.pattern import TactilePattern
 
 __all__ = ["SUFFIX", "LIMITS", "build", "export"]
@@ -73,9 +74,15 @@ def build(pattern: TactilePattern, *, repeats: int = 1, name: str = "pattern", t
 
 
 def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "pattern",
-           tool: str = "", version: str | None = None, repeats: int = 1) -> Export:
-    """Render the ``.haptic`` file; see the module docstring. ``sound`` and ``coupling`` are
-    not carried.
+           tool: str = "", version: str | None = None, repeats: int = 1,
+           haptic_file: str | None = None) -> Export:
+    """Render the ``.haptic`` file and, when ``coupling`` is given, a Unity script
+    (:func:`realpen.exports.snippets.unity_player`) that loops it with Nice Vibrations, its level
+    following Eq. 1; see the module docstring. ``sound`` is not carried.
+
+    Args:
+        haptic_file: the clip's file name (default ``<name>.haptic``); names the script
+            (:func:`~realpen.exports.snippets.unity_script_name`).
 
     Raises:
         RealPenError: the document breaks a Lofelt v1 rule
@@ -84,7 +91,12 @@ def export(pattern: TactilePattern, sound=None, coupling=None, *, name: str = "p
     document = check_haptic(build(pattern, repeats=repeats, name=name, tool=tool,
                                   version=version), f"{name}{SUFFIX}")
     points = document["signals"]["continuous"]["envelopes"]["amplitude"]
+    summary = (f"{len(points)} amplitude and frequency breakpoints over "
+               f"{points[-1]['time'] * 1000:g} ms")
+    companions = {}
+    if coupling is not None:
+        clip = haptic_file or f"{name}{SUFFIX}"
+        companions[unity_script_name(clip)] = unity_player(name, coupling, clip).encode("utf-8")
+        summary += ", a Unity script applying Eq. 1"
     return Export((json.dumps(document, indent=2, allow_nan=False) + "\n").encode("utf-8"),
-                  f"{len(points)} amplitude and frequency breakpoints over "
-                  f"{points[-1]['time'] * 1000:g} ms",
-                  limits=LIMITS + residual_limits(pattern, RESIDUAL_IN_ENVELOPE))
+                  summary, companions, LIMITS + residual_limits(pattern, RESIDUAL_IN_ENVELOPE))
