@@ -262,7 +262,8 @@ def kotlin(document: dict) -> str:
     wenv, benv = document["waveform_envelope"], document["basic_envelope"]
 
     def points(entries: list[dict], first: str, second: str) -> str:
-        return "".join(f"\n        .addControlPoint({p[first]}f, {p[second]}f, {p['duration_ms']}L)"
+        return "".join(f"\n        .addControlPoint({p[first]}f * drive, {p[second]}f, "
+                       f"{p['duration_ms']}L)"
                        for p in entries)
 
     def wrapped(values: list[int], suffix: str = "") -> str:
@@ -277,7 +278,9 @@ def kotlin(document: dict) -> str:
     coupling = document.get("coupling")
     if coupling is None:
         play, imports, coupled = "waveform()", "import android.os.VibrationEffect", ""
+        drive_hint = ""
     else:
+        drive_hint = ": gain(pressure, speedMmS) / A_MAX"
         play = "waveform(pressure, speedMmS)"
         imports = "import android.os.VibrationEffect\nimport kotlin.math.roundToInt"
         coupled = _coupling_kotlin(coupling)
@@ -299,13 +302,15 @@ object {obj} {{
     fun waveform(): VibrationEffect = VibrationEffect.createWaveform(TIMINGS, AMPLITUDES, 0)
 {coupled}
     /** API 36+: amplitude and frequency envelope; frequencies the device cannot play are not
-     *  played (see Vibrator.getFrequencyProfile()). Starts and ends at amplitude 0. */
-    fun waveformEnvelope(): VibrationEffect = VibrationEffect.WaveformEnvelopeBuilder()
+     *  played (see Vibrator.getFrequencyProfile()). Starts and ends at amplitude 0.
+     *  drive (0–1{drive_hint}) scales the amplitudes. */
+    fun waveformEnvelope(drive: Float = 1f): VibrationEffect = VibrationEffect.WaveformEnvelopeBuilder()
         .setInitialFrequencyHz({wenv['initial_frequency_hz']}f){wave_points}
         .build()
 
-    /** API 36+: intensity and sharpness envelope, adapted to the device by the framework. */
-    fun basicEnvelope(): VibrationEffect = VibrationEffect.BasicEnvelopeBuilder()
+    /** API 36+: intensity and sharpness envelope, adapted to the device by the framework.
+     *  drive (0–1{drive_hint}) scales the intensities. */
+    fun basicEnvelope(drive: Float = 1f): VibrationEffect = VibrationEffect.BasicEnvelopeBuilder()
         .setInitialSharpness({benv['initial_sharpness']}f){basic_points}
         .build()
 }}
