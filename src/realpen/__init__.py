@@ -204,7 +204,7 @@ def export(fmt: str, path, item, *, sound=None, coupling=None, **options):
         >>> folder = pathlib.Path(tempfile.mkdtemp())
         >>> written = rp.export("ahap", folder / "pencil.ahap", rp.load_profile("pencil"))
         >>> sorted(p.name for p in folder.iterdir())
-        ['pencil-sound.wav', 'pencil.ahap']
+        ['pencil-sound.wav', 'pencil.ahap', 'pencil.swift']
     """
     from realpen.exports import export as write
 
