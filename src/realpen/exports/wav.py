@@ -153,7 +153,11 @@ def encode(samples: np.ndarray, rate: int, subtype: str = DEFAULT_SUBTYPE) -> by
     import soundfile as sf
 
     scale = 2 ** (_BITS[subtype] - 1)
-    codes = np.clip(np.rint(np.asarray(samples, dtype=np.float64) * scale), -scale, scale - 1)
+    # float32 rounds exactly here (scaling by a power of two keeps a float32's 24-bit mantissa)
+    # and holds half the memory of float64: a stereo export may be 2²⁵ frames.
+    codes = np.asarray(samples, dtype=np.float32) * np.float32(scale)
+    np.rint(codes, out=codes)
+    np.clip(codes, -scale, scale - 1, out=codes)
     if scale == 2 ** 15:
         data, written = codes.astype(np.int16), "PCM_16"
     else:  # libsndfile writes the top 24 bits of 32-bit integers: nothing is rounded there
