@@ -84,16 +84,24 @@ def serve(tmp_path: Path, *args: str, timeout: float = 30,
     lines: list[str] = []
     deadline = time.monotonic() + timeout
     match = None
+    # Raw reads of the pipe: a buffered readline() would take two lines that arrive together
+    # and leave the second where select() no longer sees it.
+    pipe, pending = process.stdout.fileno(), ""
     try:
         while match is None:
             if process.poll() is not None or time.monotonic() > deadline:
                 rest = process.stdout.read() if process.poll() is not None else ""
-                raise RuntimeError(f"realpen serve did not start: {''.join(lines)}{rest}")
-            ready, _, _ = select.select([process.stdout], [], [], 0.2)
+                raise RuntimeError(f"realpen serve did not start: {''.join(lines)}{pending}"
+                                   f"{rest}")
+            ready, _, _ = select.select([pipe], [], [], 0.2)
             if ready:
-                line = process.stdout.readline()
-                lines.append(line)
-                match = URL_LINE.search(line)
+                chunk = os.read(pipe, 65536).decode("utf-8", errors="replace")
+                *complete, pending = (pending + chunk).split("\n")
+                for line in complete:
+                    lines.append(line + "\n")
+                    match = match or URL_LINE.search(line)
+        if pending:
+            lines.append(pending)
         url = match.group(1)
         token = url.split("?token=")[1] if "?token=" in url else None
         served = Served(url, url.split("?")[0], token, process, lines, stderr_to)
