@@ -207,7 +207,7 @@ MALFORMED = (
     ("x.ahap", {"Pattern": [{"Event": {"Time": 0, "EventType": "HapticBuzz"}}]},
      "Pattern[0].Event.EventType: must be one of"),
     ("x.ahap", {"Pattern": [{"Event": {"Time": -1, "EventType": "HapticTransient"}}]},
-     "Pattern[0].Event.Time: must be ≥ 0"),
+     "Pattern[0].Event.Time: must be from 0 to 3600, got -1"),
     ("x.ahap", {"Pattern": [{"Event": {"Time": 0, "EventType": "HapticContinuous"}}]},
      "Pattern[0].Event.EventDuration: is missing"),
     ("x.ahap", {"Pattern": [{"ParameterCurve": {
@@ -233,6 +233,23 @@ MALFORMED = (
     ("x.json", {"format": "realpen-android-vibration", "version": 1,
                 "waveform": {"timings_ms": [10], "amplitudes": [300]}},
      "waveform.amplitudes[0]: must be from 0 to 255"),
+    # Inputs that once built gigabytes or ended in a traceback.
+    ("x.haptic", {"version": {"major": 1}, "signals": {"continuous": {"envelopes": {
+        "amplitude": [{"time": 0, "amplitude": 0.5}, {"time": 1e15, "amplitude": 0.5}]}}}},
+     "amplitude[1].time: must be from 0 to 3600, got 1e+15"),
+    ("x.ahap", {"Pattern": [{"Event": {"EventType": "HapticTransient", "Time": 10**30}}]},
+     "Pattern[0].Event.Time: must be from 0 to 3600, got 1e+30"),
+    ("x.json", {"format": "realpen-android-vibration", "version": 1,
+                "waveform": {"timings_ms": [10], "amplitudes": [30]},
+                "waveform_envelope": {"initial_frequency_hz": 150, "control_points": [
+                    {"amplitude": 0.5, "frequency_hz": 150, "duration_ms": 10}]},
+                "basic_envelope": {"control_points": 5}},
+     "basic_envelope.control_points: must be an array, got 5"),
+    ("x.json", {"format": "realpen-android-vibration", "version": 1,
+                "waveform": {"timings_ms": [10**12], "amplitudes": [30]},
+                "waveform_envelope": {"initial_frequency_hz": 150, "control_points": [
+                    {"amplitude": 0.5, "frequency_hz": 150, "duration_ms": 10}]}},
+     "plays 1e+09 s; RealPen reads haptic files of at most 3600 s"),
 )
 
 
@@ -267,7 +284,8 @@ def test_realpen_export_read_renders_every_format(tmp_path):
         wav = tmp_path / f"marker{suffix}.wav"
         result = run_cli("export", "read", out, "--render", wav, "--rate", "8000")
         assert result.returncode == 0, result.stderr
-        assert result.stdout.startswith(f"{out}: {reading.format_of_file(out)}, 1500 ms: ")
+        first = result.stdout.splitlines()[0]
+        assert first.startswith(f"{out}: {reading.format_of_file(out)}: ") and "1500 ms" in first
         assert f"wrote {wav}: 12000 samples at 8000 Hz" in result.stdout
         samples, rate = sf.read(wav)
         assert rate == 8000 and len(samples) == 12000
@@ -275,3 +293,26 @@ def test_realpen_export_read_renders_every_format(tmp_path):
         assert r > 0.95, (suffix, r)
     again = run_cli("export", "read", out, "--render", wav)
     assert again.returncode == 2 and "--force" in again.stderr
+    mp3 = run_cli("export", "read", out, "--render", tmp_path / "x.mp3")
+    assert mp3.returncode == 2 and "name it x.wav" in mp3.stderr
+    assert not (tmp_path / "x.mp3").exists()
+
+
+def test_an_ahap_continuous_event_lasts_at_most_30_s(tmp_path):
+    path = as_haptic(tmp_path, {"Pattern": [{"Event": {
+        "EventType": "HapticContinuous", "Time": 0, "EventDuration": 1e9}}]}, "long.ahap")
+    clip = load_haptic(path)
+    assert clip.duration_s == 30.0
+    assert any("EventDuration" in note and "clamped" in note for note in clip.notes)
+    assert len(clip.render(100)) == 3000
+
+
+def test_overlapping_continuous_events_render_in_one_pass():
+    """Many events over the whole clip: the levels add (clipped at 1) without a pass each."""
+    pattern = carrier.Pattern()
+    pattern.continuous += [(0.0, 1.0, 0.01, 0.5)] * 50_000
+    pattern.continuous.append((0.5, 0.25, 0.3, 0.5))
+    y = pattern.render(1000)
+    assert len(y) == 1000 and np.max(np.abs(y)) == pytest.approx(1.0, abs=0.01)
+    single = carrier.Pattern(continuous=[(0.0, 1.0, 1.0, 0.5)]).render(1000)
+    assert np.allclose(y, single)

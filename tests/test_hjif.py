@@ -221,6 +221,13 @@ def test_default_timescale_base_signals_curves_and_transients(tmp_path):
     (lambda band: band["effects"][0].update(phase="0"),
      "effects[0].phase: must be a number, got '0'"),
     (lambda band: band.pop("effects"), "bands[0].effects: is missing"),
+    (lambda band: band.update(band_type="Curve", curve_type=5), "bands[0].curve_type: must be "
+                                                                 "text, got 5"),
+    (lambda band: (band.update(band_type="Curve"),
+                   [k.pop("amplitude_modulation") for k in band["effects"][0]["keyframes"]]),
+     "effects[0].keyframes: a Curve effect needs keyframes with amplitude_modulation"),
+    (lambda band: band["effects"][0]["keyframes"][1].update(relative_position=2**40),
+     "plays 1.09951e+09 s; RealPen reads haptic files of at most 3600 s"),
 ])
 def test_malformed_files_are_refused_in_one_line(tmp_path, change, expected):
     band = {"band_type": "VectorialWave", "lower_frequency_limit": 0,
@@ -236,3 +243,14 @@ def test_malformed_files_are_refused_in_one_line(tmp_path, change, expected):
     message = str(info.value)
     assert message.startswith(f"{path}: ") and "\n" not in message
     assert expected in message, message
+
+
+def test_a_render_is_refused_when_the_effects_span_too_much(tmp_path, pens, monkeypatch):
+    from realpen.exports.readers import hjif as reader
+
+    clip = load_haptic(export("hjif", tmp_path / "p.hjif", pens["pencil"]).path)
+    monkeypatch.setattr(reader, "MAX_RENDER_SAMPLES", 100_000)
+    with pytest.raises(RealPenError, match=r"p\.hjif: its 310 effects span [\d.]+ s in all: "
+                                           r"[\d,]+ samples at 8000 Hz; RealPen renders at most "
+                                           r"100,000$"):
+        clip.render(8000)

@@ -124,13 +124,16 @@ def read(
     --render writes the vibration a player would drive (see realpen.exports.readers for how
     each format is played).
     """
+    from realpen.errors import fail
     from realpen.exports.reading import frame_rms, load_haptic
     from realpen.io.files import write_wav
 
     if render is not None:
+        if render.suffix.lower() != ".wav":
+            raise fail(render, f"--render writes a WAV file; name it {render.stem}.wav")
         check_outputs(render, force=force, inputs={"file": file})
     clip = load_haptic(file)
-    console.print(f"{clip.path}: {clip.format}, {clip.duration_s * 1000:g} ms: {clip.summary}")
+    console.print(f"{clip.path}: {clip.format}: {clip.summary}")
     for note in clip.notes:
         console.print(f"note: {note}")
     if render is not None:

@@ -176,7 +176,7 @@ def _effect(start: int, length: int, fade: int, component: Component, first: int
 
 def _schema_phase(phase: float) -> float:
     """``phase`` (rad) in the schema's range 0 … :data:`MAX_PHASE` at 6 decimals; a phase
-    that rounds above it is within 3·10⁻⁶ rad of 2π, i.e. of 0."""
+    that rounds above it is within 5·10⁻⁶ rad of 2π, i.e. of 0."""
     value = round(float(np.mod(phase, 2 * np.pi)), 6)
     return 0.0 if value > MAX_PHASE else value
 

@@ -15,6 +15,7 @@ in :attr:`HapticFile.notes`.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,11 +37,14 @@ READ_FORMATS = {".hjif": "hjif", ".haptic": "haptic", ".ahap": "ahap", ".json": 
 ``.vij`` is refused by the ``.haptic`` reader, saying so)."""
 DEFAULT_RENDER_RATE = 8000
 """The rate (Hz) :meth:`HapticFile.render` uses by default: the bundled pens' own."""
-MAX_HAPTIC_FILE_BYTES = 256 * 1024 * 1024
-"""The largest haptic file read (bytes): the largest ``.hjif`` RealPen writes
-(:data:`realpen.exports.hjif.MAX_EFFECTS` effects) is under this."""
-MAX_HAPTIC_VALUES = 2**24
-"""The most JSON values (objects, arrays, numbers, strings) in a haptic file read."""
+MAX_HAPTIC_FILE_BYTES = {"hjif": 256 * 1024 * 1024, "haptic": 16 * 1024 * 1024,
+                         "ahap": 16 * 1024 * 1024, "android": 16 * 1024 * 1024}
+"""The largest haptic file read, by format (bytes): the largest ``.hjif`` RealPen writes
+(:data:`realpen.exports.hjif.MAX_EFFECTS` effects) is under 256 MB; the largest envelope file
+(600 s at a point every 10 ms) under 10 MB."""
+MAX_HAPTIC_VALUES = {"hjif": 2**24, "haptic": 2**20, "ahap": 2**20, "android": 2**20}
+"""The most JSON values (objects, arrays, numbers, strings) in a haptic file read, by format;
+checking each costs time."""
 
 
 @dataclass(frozen=True)
@@ -79,7 +83,7 @@ class HapticFile:
                 holds (:data:`~realpen.exports.base.MAX_EXPORT_FRAMES`).
         """
         if isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer)) \
-                or not np.isfinite(rate) or int(rate) != rate \
+                or not math.isfinite(rate) or int(rate) != rate \
                 or not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
             raise ParameterError("rate", f"must be a whole number of Hz from {MIN_RATE_HZ:g} "
                                          f"to {MAX_RATE_HZ:g}, got {rate}")
@@ -154,7 +158,8 @@ def load_haptic(path: str | os.PathLike) -> HapticFile:
     fmt = format_of_file(path)
     if not path.is_file():
         raise fail(path, "no such file" if not path.exists() else "is not a file")
-    document = load_json(path, max_bytes=MAX_HAPTIC_FILE_BYTES, max_values=MAX_HAPTIC_VALUES)
+    document = load_json(path, max_bytes=MAX_HAPTIC_FILE_BYTES[fmt],
+                         max_values=MAX_HAPTIC_VALUES[fmt])
     if not isinstance(document, dict):
         raise fail(path, f"must hold a JSON object, got {type(document).__name__}")
     playback = _reader(fmt).read(document, path)

@@ -7,7 +7,10 @@ reference (``CHHapticDynamicParameter``, ``CHHapticParameterCurve``):
   (an entry with none of them is refused: Core Haptics would ignore it silently).
 - ``HapticContinuous`` events play from ``Time`` for ``EventDuration`` s; ``HapticTransient``
   events are clicks at ``Time``. Every event needs its ``EventType`` and ``Time`` (and a
-  continuous one its ``EventDuration``): a file without them is refused, not defaulted.
+  continuous one its ``EventDuration``): a file without them is refused, not defaulted. A
+  continuous event lasts at most 30 s (Apple's limit, :data:`realpen.exports.ahap.MAX_EVENT_S`):
+  a longer one is cut there, and the notes say so; times beyond
+  :data:`~realpen.exports.readers.fields.MAX_PLAY_S` are refused.
   ``HapticIntensity`` and ``HapticSharpness`` are 0 … 1 (read as 1 and 0.5 when absent:
   RealPen's assumption, as Core Haptics' defaults are not stated in the format's
   description) and, like Core Haptics, clamped into range.
@@ -35,13 +38,16 @@ from pathlib import Path
 
 import numpy as np
 
+from realpen.exports.ahap import MAX_EVENT_S
 from realpen.exports.readers import carrier
 from realpen.exports.readers.fields import (
     Playback,
     array,
+    check_parts,
     member,
     number,
     problem,
+    seconds,
     text,
     where,
 )
@@ -79,14 +85,15 @@ def _event(reading: _Reading, raw: object, at: str) -> None:
     source = reading.source
     kind = text(member(raw, "EventType", source, at), source, where(at, "EventType"),
                 choices=EVENT_TYPES)
-    time = number(member(raw, "Time", source, at), source, where(at, "Time"), low=0.0)
+    time = seconds(member(raw, "Time", source, at), source, where(at, "Time"))
     if kind.startswith("Audio"):
         reading.audio += 1
         return
     duration = 0.0
     if kind == "HapticContinuous":
-        duration = number(member(raw, "EventDuration", source, at), source,
-                          where(at, "EventDuration"), low=0.0)
+        duration = reading.clamp(number(member(raw, "EventDuration", source, at), source,
+                                        where(at, "EventDuration"), low=0.0),
+                                 0.0, MAX_EVENT_S, "EventDuration")
     values = {"HapticIntensity": DEFAULT_INTENSITY, "HapticSharpness": DEFAULT_SHARPNESS}
     listed = array(member(raw, "EventParameters", source, at, required=False, default=[]),
                    source, where(at, "EventParameters"))
@@ -110,7 +117,7 @@ def _event(reading: _Reading, raw: object, at: str) -> None:
 def _parameter(reading: _Reading, raw: object, at: str) -> None:
     source = reading.source
     name = text(member(raw, "ParameterID", source, at), source, where(at, "ParameterID"))
-    time = number(member(raw, "Time", source, at), source, where(at, "Time"), low=0.0)
+    time = seconds(member(raw, "Time", source, at), source, where(at, "Time"))
     value = number(member(raw, "ParameterValue", source, at), source,
                    where(at, "ParameterValue"))
     reading.parameters += 1
@@ -124,15 +131,14 @@ def _parameter(reading: _Reading, raw: object, at: str) -> None:
 def _curve(reading: _Reading, raw: object, at: str) -> None:
     source = reading.source
     name = text(member(raw, "ParameterID", source, at), source, where(at, "ParameterID"))
-    time = number(member(raw, "Time", source, at), source, where(at, "Time"), low=0.0)
+    time = seconds(member(raw, "Time", source, at), source, where(at, "Time"))
     points_at = where(at, "ParameterCurveControlPoints")
     points = array(member(raw, "ParameterCurveControlPoints", source, at), source, points_at,
                    min_items=1)
     read_points: list[tuple[float, float]] = []
     for index, point in enumerate(points):
         here = where(points_at, index)
-        when = number(member(point, "Time", source, here), source, where(here, "Time"),
-                      low=0.0)
+        when = seconds(member(point, "Time", source, here), source, where(here, "Time"))
         if read_points and when < read_points[-1][0]:
             raise problem(source, where(here, "Time"),
                           f"control points must be in time order ({when:g} after "
@@ -165,6 +171,7 @@ def read(document: dict, source: Path) -> Playback:
     if "Version" in document:
         number(document["Version"], source, "Version", low=0.0)
     entries = array(member(document, "Pattern", source, ""), source, "Pattern", min_items=1)
+    check_parts(len(entries), "pattern entries", source)
     reading = _Reading(source)
     readers = {"Event": _event, "Parameter": _parameter, "ParameterCurve": _curve}
     for index, entry in enumerate(entries):

@@ -21,10 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
+from realpen.exports.android import MAX_AMPLITUDE
 from realpen.exports.readers import carrier
 from realpen.exports.readers.fields import (
     Playback,
     array,
+    check_parts,
+    check_play_time,
     integer,
     member,
     number,
@@ -33,11 +36,10 @@ from realpen.exports.readers.fields import (
     where,
 )
 
-__all__ = ["FORMAT", "VERSION", "MAX_AMPLITUDE", "read"]
+__all__ = ["FORMAT", "VERSION", "read"]
 
 FORMAT = "realpen-android-vibration"
 VERSION = 1
-MAX_AMPLITUDE = 255  # VibrationEffect's full amplitude
 _NOTE = ("the createWaveform steps rendered (amplitude/255 held for each step) on a sine whose "
          "frequency follows the waveform envelope's control points (Hz, linear over each "
          "duration); createWaveform itself carries no frequency")
@@ -49,6 +51,7 @@ def _waveform(document: dict, source: Path) -> tuple[np.ndarray, np.ndarray, int
                     "waveform.timings_ms", min_items=1)
     amplitudes = array(member(wave, "amplitudes", source, "waveform"), source,
                        "waveform.amplitudes", min_items=1)
+    check_parts(len(timings), "waveform steps", source)
     if len(timings) != len(amplitudes):
         raise problem(source, "waveform.amplitudes",
                       f"must hold one amplitude per timing ({len(amplitudes)} amplitudes, "
@@ -104,9 +107,11 @@ def read(document: dict, source: Path) -> Playback:
     steps_ms, levels, repeat = _waveform(document, source)
     freq_times, freq_hz = _frequency(document, source)
     basic = document.get("basic_envelope")
-    basic_points = len(basic.get("control_points", [])) if isinstance(basic, dict) else 0
+    basic_points = 0 if basic is None else len(array(
+        member(basic, "control_points", source, "basic_envelope"), source,
+        "basic_envelope.control_points"))
     edges = np.concatenate([[0.0], np.cumsum(steps_ms)]) / 1000
-    duration_s = float(edges[-1])
+    duration_s = check_play_time(float(edges[-1]), source)
 
     def render(rate: int) -> np.ndarray:
         t = carrier.sample_times(duration_s, rate)

@@ -149,12 +149,20 @@ class Pattern:
         consecutive events; transients add their bursts.
         """
         t = sample_times(self.duration_s, rate)
-        level = np.zeros(len(t))
-        weighted = np.zeros(len(t))
-        for time, length, intensity, sharpness in self.continuous:
-            first, last = np.searchsorted(t, [time, time + length], side="left")
-            level[first:last] += intensity
-            weighted[first:last] += intensity * sharpness
+        # Each event adds its level from its first sample to its last: steps summed once, so
+        # the work grows with the events plus the samples, however the events overlap.
+        level_steps, weighted_steps = np.zeros(len(t) + 1), np.zeros(len(t) + 1)
+        if self.continuous:
+            events = np.array(self.continuous, dtype=np.float64)
+            first = np.searchsorted(t, events[:, 0], side="left")
+            last = np.searchsorted(t, events[:, 0] + events[:, 1], side="left")
+            for steps, amount in ((level_steps, events[:, 2]),
+                                  (weighted_steps, events[:, 2] * events[:, 3])):
+                np.add.at(steps, first, amount)
+                np.add.at(steps, last, -amount)
+        level = np.cumsum(level_steps)[:len(t)]
+        weighted = np.cumsum(weighted_steps)[:len(t)]
+        level[np.abs(level) < 1e-12] = 0.0  # what the running sum leaves of events that ended
         sharp = np.divide(weighted, level, out=np.zeros(len(t)), where=level > 0)
         gain, shift = self.intensity.at(t), self.sharpness.at(t)
         out = carrier(np.clip(level * gain, 0.0, 1.0),

@@ -6,6 +6,7 @@ e.g. ``"pen.ahap: Pattern[3].Event.Time: must be a number ≥ 0, got 'soon'"``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -13,7 +14,16 @@ import numpy as np
 
 from realpen.errors import RealPenError, fail
 
-__all__ = ["Playback", "where", "member", "number", "integer", "text", "array", "problem"]
+__all__ = ["MAX_PLAY_S", "MAX_PARTS", "Playback", "where", "member", "number", "integer",
+           "seconds", "text", "array", "problem", "check_parts", "check_play_time"]
+
+MAX_PLAY_S = 3600.0
+"""The longest a haptic file read may play, in s: an hour (RealPen's exports hold at most
+600 s); times beyond it are refused before anything is built."""
+MAX_PARTS = 100_000
+"""The most effects, events, breakpoints or steps a haptic file read may hold: as many as the
+largest ``.hjif`` RealPen writes (:data:`realpen.exports.hjif.MAX_EFFECTS`); rendering costs
+time in proportion to them."""
 
 
 @dataclass(frozen=True)
@@ -74,7 +84,8 @@ def number(value: object, source: object, at: str, *, low: float | None = None,
     Raises:
         RealPenError: not a number (booleans are not), or out of range, naming the range.
     """
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+    # math.isfinite: np.isfinite refuses Python ints beyond 64 bits, which JSON may hold.
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise problem(source, at, f"must be a number, got {_shown(value)}")
     if (low is not None and value < low) or (high is not None and value > high):
         span = (f"from {low:g} to {high:g}" if low is not None and high is not None
@@ -91,10 +102,43 @@ def integer(value: object, source: object, at: str, *, low: int | None = None,
         RealPenError: not a whole number, or out of range.
     """
     if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not np.isfinite(value) or int(value) != value:
+            or not math.isfinite(value) or int(value) != value:
         raise problem(source, at, f"must be a whole number, got {_shown(value)}")
     number(value, source, at, low=low, high=high)
     return int(value)
+
+
+def seconds(value: object, source: object, at: str) -> float:
+    """A time in s: a number from 0 to :data:`MAX_PLAY_S`.
+
+    Raises:
+        RealPenError: not a number, negative, or beyond :data:`MAX_PLAY_S`.
+    """
+    return number(value, source, at, low=0.0, high=MAX_PLAY_S)
+
+
+def check_play_time(duration_s: float, source: object) -> float:
+    """``duration_s`` if it is at most :data:`MAX_PLAY_S`.
+
+    Raises:
+        RealPenError: naming the file and the limit.
+    """
+    if not duration_s <= MAX_PLAY_S:
+        raise problem(source, "", f"plays {duration_s:g} s; RealPen reads haptic files of at "
+                                  f"most {MAX_PLAY_S:g} s")
+    return duration_s
+
+
+def check_parts(count: int, what: str, source: object) -> int:
+    """``count`` if it is at most :data:`MAX_PARTS`.
+
+    Raises:
+        RealPenError: naming the file, what was counted and the limit.
+    """
+    if count > MAX_PARTS:
+        raise problem(source, "", f"holds {count:,} {what}; RealPen reads at most "
+                                  f"{MAX_PARTS:,}")
+    return count
 
 
 def text(value: object, source: object, at: str, *, choices: tuple[str, ...] = ()) -> str:

@@ -29,14 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
+from realpen.exports.ahap import MAX_EVENT_S  # Lofelt's converter splits events there too
 from realpen.exports.haptic_rules import check_haptic
 from realpen.exports.readers import carrier
-from realpen.exports.readers.fields import Playback
+from realpen.exports.readers.fields import Playback, check_parts, seconds
 
-__all__ = ["EMPHASIS_DUCKING", "MAX_EVENT_S", "NOTES", "to_pattern", "read"]
+__all__ = ["EMPHASIS_DUCKING", "NOTES", "to_pattern", "read"]
 
 EMPHASIS_DUCKING = 0.2  # Lofelt lowers the continuous intensity by this fraction at an emphasis
-MAX_EVENT_S = 30.0  # Lofelt's converter splits continuous events at Core Haptics' 30 s
 NOTES = (
     "played as Core Haptics plays the AHAP Lofelt's converter makes of it: intensity "
     "√amplitude (×0.8 at an emphasis), sharpness √frequency, and a transient (intensity "
@@ -83,6 +83,13 @@ def read(document: dict, source: Path) -> Playback:
         RealPenError: one line naming the file, the field and the Lofelt v1 rule it breaks.
     """
     check_haptic(document, source)
+    envelopes = document["signals"]["continuous"]["envelopes"]
+    for name in ("amplitude", "frequency"):
+        points = envelopes.get(name) or []
+        check_parts(len(points), f"{name} breakpoints", source)
+        if points:
+            seconds(points[-1]["time"], source, f"signals.continuous.envelopes.{name}"
+                                                f"[{len(points) - 1}].time")
     pattern = to_pattern(document)
     envelopes = document["signals"]["continuous"]["envelopes"]
     amplitude = envelopes["amplitude"]

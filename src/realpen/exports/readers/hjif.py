@@ -34,6 +34,8 @@ import numpy as np
 from realpen.exports.readers.fields import (
     Playback,
     array,
+    check_parts,
+    check_play_time,
     integer,
     member,
     number,
@@ -42,11 +44,15 @@ from realpen.exports.readers.fields import (
     where,
 )
 
-__all__ = ["DEFAULT_TIMESCALE", "TRANSIENT_S", "BASE_SIGNALS", "read"]
+__all__ = ["DEFAULT_TIMESCALE", "TRANSIENT_S", "BASE_SIGNALS", "MAX_RENDER_SAMPLES", "read"]
 
 DEFAULT_TIMESCALE = 1000  # ticks per second when the file gives none (the standard's default)
 TRANSIENT_S = 0.022  # the reference software's transient length
 BASE_SIGNALS = ("Sine", "Square", "Triangle", "SawToothUp", "SawToothDown")
+MAX_RENDER_SAMPLES = 2**30
+"""The most effect samples one render computes (the effects' spans summed, at the render's
+rate): the pencil's largest export (100 periods, 31,000 effects spanning 1,571 s in all) is
+6·10⁸ at 384 kHz."""
 _VERSION = re.compile(r"^[0-9]{4}(-[0-9])?$")
 
 
@@ -172,6 +178,9 @@ def _effect(raw: object, source: Path, at: str, kind: str) -> _Effect:
                                 where(here, "frequency_modulation"), low=0.0, high=10000.0))
     if kind == "VectorialWave" and not times:
         raise problem(source, where(at, "keyframes"), "a VectorialWave effect needs keyframes")
+    if kind in ("Curve", "Transient") and not amps:
+        raise problem(source, where(at, "keyframes"),
+                      f"a {kind} effect needs keyframes with amplitude_modulation")
     return _Effect(position, np.array(times, dtype=float), np.array(amp_at, dtype=float),
                    np.array(amps), np.array(freq_at, dtype=float), np.array(freqs), phase, base)
 
@@ -181,7 +190,7 @@ def _bands(document: dict, source: Path) -> tuple[list[_Band], list[str], int]:
     perceptions = array(member(document, "perceptions", source, ""), source, "perceptions",
                         min_items=1)
     bands: list[_Band] = []
-    channels = 0
+    channels = counted = 0
     for p_index, perception in enumerate(perceptions):
         p_at = where("perceptions", p_index)
         for c_index, channel in enumerate(array(member(perception, "channels", source, p_at),
@@ -200,11 +209,13 @@ def _bands(document: dict, source: Path) -> tuple[list[_Band], list[str], int]:
                     raise problem(source, where(b_at, "band_type"),
                                   "WaveletWave bands are not read (RealPen reads "
                                   "VectorialWave, Curve and Transient bands)")
-                curve = band.get("curve_type", "Linear") if isinstance(band, dict) else "Linear"
+                curve = text(member(band, "curve_type", source, b_at, required=False,
+                                    default="Linear"), source, where(b_at, "curve_type"))
                 if kind == "Curve" and curve != "Linear":
                     notes.append(f"{b_at}: a {curve} curve is read as linear")
                 effects = array(member(band, "effects", source, b_at), source,
                                 where(b_at, "effects"))
+                counted = check_parts(counted + len(effects), "effects", source)
                 bands.append(_Band(kind, [_effect(e, source, where(where(b_at, "effects"), i),
                                                   kind) for i, e in enumerate(effects)], gain))
     if channels > 1:
@@ -232,9 +243,16 @@ def read(document: dict, source: Path) -> Playback:
     transient_ticks = TRANSIENT_S * timescale
     ends = [effect.end + (transient_ticks if band.kind == "Transient" else 0)
             for band in bands for effect in band.effects]
-    duration_s = (max(ends) + 1) / timescale if ends else 0.0
+    duration_s = check_play_time((max(ends) + 1) / timescale if ends else 0.0, source)
+    # Each effect is rendered over its own span: the work is the spans' sum, not the length.
+    spans_s = sum(float(end - effect.position) / timescale
+                  for end, effect in zip(ends, effects))
 
     def render(rate: int) -> np.ndarray:
+        if spans_s * rate > MAX_RENDER_SAMPLES:
+            raise problem(source, "", f"its {len(effects):,} effects span {spans_s:g} s in all: "
+                                      f"{spans_s * rate:,.0f} samples at {rate} Hz; RealPen "
+                                      f"renders at most {MAX_RENDER_SAMPLES:,}")
         count = int(round(duration_s * rate))
         out = np.zeros(count)
         for band in bands:
