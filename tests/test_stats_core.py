@@ -23,7 +23,7 @@ import scipy.stats
 from realpen.errors import ParameterError
 from realpen.stats.anova import pairwise, rm_anova
 from realpen.stats.art import aligned_rank_transform
-from realpen.stats.contrasts import contrast_decomposition
+from realpen.stats.contrasts import contrast_anova, contrast_decomposition, effect_name, effects
 from realpen.stats.intervals import cell_cis, mean_ci
 from realpen.stats.long import balanced_wide
 from realpen.stats.nonparametric import (
@@ -220,6 +220,68 @@ def test_art_aligned_check_is_zero_on_random_data():
     assert list(table["df2"]) == [5, 10, 10] and table["p"].between(0, 1).all()
     one = aligned_rank_transform(data[data["B"] == "b1"], dv="y", within=["A"], subject="s").iloc[0]
     assert one["effect"] == "A" and math.isnan(one["aligned_check"])
+
+
+def _random_tables(sizes: tuple[int, ...], n: int = 7) -> tuple[list[str], np.ndarray, list[pd.DataFrame]]:
+    """A table of normal values and one of 1–5 ratings (ties) over ``sizes`` levels, as an
+    array (tables × subjects × cells) and in long format (columns s, A, B, D, y)."""
+    rng = np.random.default_rng(sum(sizes) * 10 + len(sizes))
+    cells = math.prod(sizes)
+    batch = np.concatenate([rng.normal(size=(1, n, cells)),
+                            rng.integers(1, 6, size=(1, n, cells)).astype(float)])
+    factors = ["A", "B", "D"][:len(sizes)]  # statsmodels refuses a factor named C
+    index = pd.MultiIndex.from_product([[f"s{i}" for i in range(n)],
+                                        *[[f"{name.lower()}{j}" for j in range(k)]
+                                          for name, k in zip(factors, sizes)]], names=["s", *factors])
+    frames = [pd.DataFrame({"y": values.ravel()}, index=index).reset_index() for values in batch]
+    return factors, batch, frames
+
+
+# pingouin's own rm_anova calls a pandas method pandas 3.1 deprecates; not ours to mend.
+@pytest.mark.filterwarnings("ignore:The inplace keyword:DeprecationWarning")
+@pytest.mark.parametrize("sizes", [(3,), (2, 3), (2, 2, 3)])
+def test_contrast_anova_equals_statsmodels_and_rm_anova(sizes):
+    from statsmodels.stats.anova import AnovaRM
+
+    factors, batch, frames = _random_tables(sizes)
+    parts = contrast_anova(batch, sizes)
+    for index, long in enumerate(frames):
+        reference = AnovaRM(long, depvar="y", subject="s", within=factors).fit().anova_table
+        table = rm_anova(long, dv="y", within=factors, subject="s").set_index("effect")
+        for effect in effects(factors):
+            name, entry = effect_name(factors, effect), parts[effect]
+            assert (entry["df1"], entry["df2"]) == tuple(reference.loc[name, ["Num DF", "Den DF"]])
+            assert entry["F"][index] == pytest.approx(reference.loc[name, "F Value"], rel=1e-9)
+            assert entry["p"][index] == pytest.approx(reference.loc[name, "Pr > F"], rel=1e-9)
+            assert entry["ges"][index] == pytest.approx(table.loc[name, "effect_size"], rel=1e-9)
+            if entry["df1"] > 1:
+                for column in ("eps_gg", "eps_hf", "p_mauchly"):
+                    assert entry[column][index] == pytest.approx(table.loc[name, column], rel=1e-9)
+
+
+@pytest.mark.parametrize("sizes", [(2, 3), (2, 2, 2)])
+def test_art_equals_statsmodels_on_the_aligned_ranks(sizes):
+    """The ART's vectorised alignment and ANOVA against the definition, spelled out in pandas,
+    and statsmodels' AnovaRM of the ranks."""
+    from statsmodels.stats.anova import AnovaRM
+
+    factors, _, frames = _random_tables(sizes)
+    for long in frames[1:]:  # ratings: aligned responses with ties
+        table = aligned_rank_transform(long, dv="y", within=factors, subject="s").set_index("effect")
+        y = long["y"]
+        residual = y - long.groupby(factors)["y"].transform("mean")
+        for effect in effects(factors):
+            estimate = 0.0
+            for subset in [(), *[e for e in effects(factors) if set(e) <= set(effect)]]:
+                mean = long.groupby([factors[j] for j in subset])["y"].transform("mean") \
+                    if subset else y.mean()
+                estimate = estimate + (-1) ** (len(effect) - len(subset)) * mean
+            ranks = long.assign(y=scipy.stats.rankdata((residual + estimate).round(9)))
+            reference = AnovaRM(ranks, depvar="y", subject="s", within=factors).fit().anova_table
+            name = effect_name(factors, effect)
+            assert table.loc[name, "statistic"] == pytest.approx(reference.loc[name, "F Value"], rel=1e-9)
+            assert table.loc[name, "p"] == pytest.approx(reference.loc[name, "Pr > F"], rel=1e-9)
+            assert table.loc[name, "aligned_check"] < 1e-9
 
 
 def test_pairwise_holm_never_above_bonferroni():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import html
+import io
 import math
 import re
 import xml.etree.ElementTree as ET
@@ -247,6 +248,37 @@ def test_every_figure_is_written_as_valid_png_and_svg(rendered, kind):
         else:
             assert ET.fromstring(data).tag.endswith("svg")
     assert not list(figures[0].parent.glob(".*tmp*"))  # no staged file left behind
+
+
+def _svg_drawing(data: bytes) -> str:
+    """An SVG with the ids matplotlib draws at random numbered in order of appearance."""
+    seen: dict[str, str] = {}
+    return re.sub(r"\b(?:[mpc]|image)[0-9a-f]{10}\b",
+                  lambda match: seen.setdefault(match.group(0), f"id{len(seen)}"), data.decode())
+
+
+def test_figure_images_draw_each_type_once_as_savefig_would(monkeypatch):
+    from realpen.display.images import figure_images
+
+    analysis = study1_analysis(count=3)
+    figure = study_figures.participants_figure(analysis, "Q1")
+    engine = figure.get_layout_engine()
+    draws = []
+    original_draw = figure.draw
+    monkeypatch.setattr(figure, "draw", lambda renderer: draws.append(renderer) or original_draw(renderer))
+    images = figure_images(figure, ["png", "svg"])
+    assert len(draws) == 2  # savefig alone draws twice per type (a layout pass, then the drawing)
+    assert figure.get_layout_engine() is engine
+    assert all(axis._autolabelpos for ax in figure.axes for axis in (ax.xaxis, ax.yaxis))
+    reference = study_figures.participants_figure(analysis, "Q1")
+    expected = {}
+    for kind in ("png", "svg"):  # the PNG's layout kept for the SVG
+        buffer = io.BytesIO()
+        reference.savefig(buffer, format=kind, dpi=150, metadata={"Date": None} if kind == "svg" else {})
+        expected[kind] = buffer.getvalue()
+        reference.set_layout_engine("none")
+    assert images["png"] == expected["png"]
+    assert _svg_drawing(images["svg"]) == _svg_drawing(expected["svg"])
 
 
 def test_figures_draw_into_given_axes_and_show_the_tables_numbers():

@@ -25,8 +25,8 @@ from matplotlib.patches import Rectangle
 from realpen.display.axes import axes_list
 
 __all__ = ["PALETTE", "MARKERS", "MEAN_COLOUR", "PARTICIPANT_COLOUR", "label_text", "factor_label",
-           "likert_limits", "panels", "style_axes", "draw_mean_ci", "draw_participant_lines",
-           "draw_participant_dots", "level_axis", "cell_outline"]
+           "likert_limits", "panels", "panel_title", "style_axes", "draw_mean_ci",
+           "draw_participant_lines", "draw_participant_dots", "level_axis", "cell_outline"]
 
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000")
 """Okabe & Ito's colour-blind-safe colours (their yellow left out: unreadable on white)."""
@@ -92,6 +92,19 @@ def panels(ax: Axes | Sequence[Axes] | None, count: int, *, columns: int,
     for spare in grid[count:]:
         spare.remove()
     return list(grid[:count]), True
+
+
+def panel_title(ax: Axes, text: str, *, own: bool, **style: object) -> None:
+    """Title ``ax`` with ``text`` (``style``: :meth:`matplotlib.axes.Axes.set_title`'s text
+    properties, e.g. ``fontsize``).
+
+    On a figure of its own (``own``: made by the caller of this function, with no ticks or
+    label above any axes) the title is fixed at the top of the axes, y = 1: where matplotlib
+    would put it anyway, but without searching every axis for decorations above at each layout
+    pass and each drawing (a tenth of the time a study figure takes to render). On the user's
+    own axes matplotlib places it.
+    """
+    ax.set_title(text, y=1.0 if own else None, **style)
 
 
 def style_axes(ax: Axes) -> None:

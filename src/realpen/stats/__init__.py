@@ -7,8 +7,8 @@ library function that does its work (scipy.stats, statsmodels, pingouin).
   ``results.csv``);
 - :mod:`~realpen.stats.long` — checking a long-format table and shaping it into subjects ×
   cells (shared by every test);
-- :mod:`~realpen.stats.contrasts` — a design's effects, statsmodels' F per effect, sums of
-  squares and sphericity from orthonormal contrasts;
+- :mod:`~realpen.stats.contrasts` — a design's effects; each effect's F, sums of squares and
+  sphericity from orthonormal contrasts, for many tables at once (and statsmodels' F);
 - :mod:`~realpen.stats.nonparametric` — Friedman (tie-corrected, Kendall's W), Wilcoxon
   signed-rank with named p-value methods (``exact``, ``r``, ``spss``);
 - :mod:`~realpen.stats.anova` — repeated-measures ANOVA (Mauchly, Greenhouse–Geisser and

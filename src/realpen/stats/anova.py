@@ -4,12 +4,17 @@
   ``AnovaRM``; generalised eta squared, Greenhouse–Geisser and Huynh–Feldt epsilon and Mauchly's
   test from pingouin (``rm_anova``, ``epsilon``, ``sphericity``) for designs of up to two
   factors, from the covariance of orthonormal contrasts for the three-way case pingouin lacks.
+- :func:`effect_row`: one effect's row of such a table from its numbers, which the aligned rank
+  transform (:mod:`realpen.stats.art`) shares.
 - :func:`pairwise`: every pair of levels of one factor, paired t (pingouin) or Wilcoxon
   signed-rank (:func:`realpen.stats.nonparametric.wilcoxon`), Bonferroni or Holm adjusted
   (statsmodels ``multipletests``).
 
 Both take a long-format DataFrame with one row per subject × cell and refuse anything else with
-one line naming the subject and the cell (:class:`realpen.errors.ParameterError`).
+one line naming the subject and the cell (:class:`realpen.errors.ParameterError`). pingouin and
+statsmodels are imported by the functions that call them, not with the module: pingouin brings
+pyplot, seaborn and xarray (0.9 s of CPU after pandas and scipy), statsmodels' AnovaRM a
+formula parser (0.2 s).
 """
 
 from __future__ import annotations
@@ -20,30 +25,36 @@ import warnings
 
 import numpy as np
 import pandas as pd
-import pingouin as pg
 import scipy.stats
-from statsmodels.stats.multitest import multipletests
 
 from realpen.checks import require_choice
 from realpen.errors import ParameterError
-from realpen.stats.contrasts import ZERO_FRACTION, anovarm_f, contrast_decomposition, effect_name, effects
+from realpen.stats.contrasts import ZERO_FRACTION, anovarm_f, contrast_anova, effect_name, effects
 from realpen.stats.long import MAX_FACTORS, balanced_wide, factor_list, safe_long
 from realpen.stats.nonparametric import WILCOXON_METHODS, wilcoxon
 from realpen.stats.results import TEST_COLUMNS, tidy
 from realpen.stats.results import test_row as _result_row  # pytest would collect "test_row"
 
-__all__ = ["rm_anova", "rm_anova_table", "pairwise", "SPHERICITY_ALPHA", "ADJUSTMENTS"]
+__all__ = ["rm_anova", "rm_anova_table", "effect_row", "pairwise", "SPHERICITY_ALPHA", "ADJUSTMENTS",
+           "CONTRAST_SOURCE"]
 
 SPHERICITY_ALPHA = 0.05
 """Mauchly's test at this level sets the ``sphericity`` column (True: not rejected)."""
 ADJUSTMENTS = ("bonferroni", "holm", "none")
 """The multiplicity adjustments :func:`pairwise` offers."""
+CONTRAST_SOURCE = ("F, df and p (each effect against its own effect × subject error, as "
+                   "statsmodels AnovaRM), generalised eta squared, Greenhouse-Geisser and "
+                   "Huynh-Feldt (Lecoutre) epsilon and Mauchly's test, all from orthonormal "
+                   "contrasts")
+"""``method`` of an ANOVA whose every number comes from :func:`realpen.stats.contrasts.contrast_anova`."""
 
 
 # --- sphericity and effect sizes from pingouin -----------------------------------------------
 
 def _pingouin_sphericity(long: pd.DataFrame, n_factors: int) -> dict[tuple[int, ...], dict[str, float]]:
     """ges, ε_GG, Mauchly from pingouin.rm_anova and ε_HF from pingouin.epsilon (≤ 2 factors)."""
+    import pingouin as pg
+
     within = [f"f{j}" for j in range(n_factors)]
     with warnings.catch_warnings(), np.errstate(divide="ignore", invalid="ignore"):
         # pingouin 0.7 calls DataFrame.dropna(inplace=True), deprecated in pandas 3.1: its noise,
@@ -142,81 +153,97 @@ def rm_anova(data: pd.DataFrame, *, dv: str, within: str | list[str], subject: s
 
 def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subject: str,
                    with_pingouin: bool) -> pd.DataFrame:
-    """:func:`rm_anova`; with ``with_pingouin`` false, ges, ε and Mauchly come from the
-    contrast covariance for any number of factors (the path three factors always take; the
-    tests check it agrees with pingouin), which saves pingouin's own refits where only F is
-    wanted (the aligned rank transform runs one ANOVA per effect)."""
+    """:func:`rm_anova`; with ``with_pingouin`` false every number (F and p too) comes from
+    :func:`realpen.stats.contrasts.contrast_anova` for any number of factors, without the
+    libraries' refits (the tests check it agrees with statsmodels and pingouin)."""
     factors = factor_list(within)
     wide = balanced_wide(data, dv=dv, within=factors, subject=subject)
-    long = safe_long(wide)
+    y = wide.to_numpy(dtype=float)
     n = len(wide)
+    parts = contrast_anova(y, [len(level) for level in wide.columns.levels])
+    zero = ZERO_FRACTION * float((y ** 2).sum())
+    widest = int(np.prod([len(level) - 1 for level in wide.columns.levels]))
+    if not with_pingouin:
+        return tidy([effect_row(factors, effect, n=n, numbers=_floats(parts[effect]),
+                                zero=zero, source=CONTRAST_SOURCE) for effect in effects(factors)])
+    long = safe_long(wide)
     with np.errstate(divide="ignore", invalid="ignore"):
         # Without within-subject variation F is 0/0 or x/0; the rows below say which.
         f_table = anovarm_f(long, len(factors))
-        decomposition = contrast_decomposition(wide)
-    zero = ZERO_FRACTION * float((wide.to_numpy(dtype=float) ** 2).sum())
-    widest = int(np.prod([len(level) - 1 for level in wide.columns.levels]))
     # pingouin's Mauchly divides by zero when subjects are fewer than an effect's contrasts + 1;
     # the contrast path gives NaN there (Mauchly is undefined) and the same numbers otherwise.
-    if len(factors) <= 2 and with_pingouin and n - 1 >= widest:
+    if len(factors) <= 2 and n - 1 >= widest:
         extra = _pingouin_sphericity(long, len(factors))
         source = ("statsmodels AnovaRM (F, df, p); pingouin.rm_anova (generalised eta squared, "
                   "Greenhouse-Geisser epsilon, Mauchly); pingouin.epsilon (Huynh-Feldt with "
                   "Lecoutre's correction, capped at 1)")
     else:
-        # The subjects' SS is the grand-mean contrast's error term, so this sums it and every
-        # effect × subject error: the denominator of ges in an all-within design.
-        total_error = sum(entry["ss_error"] for entry in decomposition.values())
-        extra = {}
-        for effect in effects(factors):
-            entry = decomposition[effect]
-            ges = entry["ss"] / (entry["ss"] + total_error)
-            extra[effect] = {"ges": ges, **{key: entry[key] for key in
-                                            ("eps_gg", "eps_hf", "mauchly_w", "p_mauchly")}}
+        extra = {effect: _floats(parts[effect]) for effect in effects(factors)}
         source = ("statsmodels AnovaRM (F, df, p); generalised eta squared, Greenhouse-Geisser and "
                   "Huynh-Feldt (Lecoutre) epsilon and Mauchly's test from the covariance of "
                   "orthonormal contrasts")
     rows = []
     for effect in effects(factors):
         f_value, df1, df2, p = f_table[effect]
-        info = extra[effect]
-        method = source
-        part = decomposition[effect]
-        if part["ss_error"] <= zero:
-            # Floating-point dust, not data: an F of 1e30 or 0.18 from 1e-30/1e-29 would mislead.
-            no_effect = part["ss"] <= zero
-            f_value, p = (math.nan, math.nan) if no_effect else (math.inf, 0.0)
-            rows.append(_result_row("RM-ANOVA", "F", f_value, p, n=n, df1=df1, df2=df2,
-                                    method=source + ("; no within-subject variation: F undefined"
-                                                     if no_effect else "; no error variance: F infinite")
-                                    + "; epsilon and Mauchly undefined",
-                                    effect_size_name="ges", effect_size=info["ges"],
-                                    effect=effect_name(factors, effect), eps_gg=math.nan, eps_hf=math.nan,
-                                    p_gg=p, p_hf=p, mauchly_w=math.nan, p_mauchly=math.nan,
-                                    sphericity=False))
-            continue
-        if df1 <= 1:
-            eps_gg = eps_hf = 1.0
-            mauchly_w = p_mauchly = math.nan
-            sphericity = True
-            method += "; 2 levels: sphericity holds trivially (epsilon = 1)"
-        else:
-            eps_gg, eps_hf = info["eps_gg"], info["eps_hf"]
-            mauchly_w, p_mauchly = info["mauchly_w"], info["p_mauchly"]
-            if n - 1 < df1:
-                # Mauchly's test needs the contrasts' covariance to have full rank.
-                mauchly_w = p_mauchly = math.nan
-                method += (f"; Mauchly's test untestable: {n} subjects give n - 1 < {df1:g} "
-                           f"contrasts")
-            sphericity = bool(p_mauchly > SPHERICITY_ALPHA)  # False when untestable (NaN)
-        p_gg = float(scipy.stats.f.sf(f_value, df1 * eps_gg, df2 * eps_gg))
-        p_hf = float(scipy.stats.f.sf(f_value, df1 * eps_hf, df2 * eps_hf))
-        rows.append(_result_row("RM-ANOVA", "F", f_value, p, n=n, method=method, df1=df1, df2=df2,
-                                effect_size_name="ges", effect_size=info["ges"],
-                                effect=effect_name(factors, effect), eps_gg=eps_gg, eps_hf=eps_hf,
-                                p_gg=p_gg, p_hf=p_hf, mauchly_w=mauchly_w, p_mauchly=p_mauchly,
-                                sphericity=sphericity))
+        numbers = {**extra[effect], "F": f_value, "df1": df1, "df2": df2, "p": p,
+                   "ss": float(parts[effect]["ss"]), "ss_error": float(parts[effect]["ss_error"])}
+        rows.append(effect_row(factors, effect, n=n, numbers=numbers, zero=zero, source=source))
     return tidy(rows)
+
+
+def _floats(entry: dict[str, np.ndarray]) -> dict[str, float]:
+    return {key: float(value) for key, value in entry.items()}
+
+
+def effect_row(factors: list[str], effect: tuple[int, ...], *, n: int, numbers: dict[str, float],
+               zero: float, source: str) -> dict:
+    """One effect's row of a repeated-measures ANOVA table (:func:`rm_anova`'s columns).
+
+    Args:
+        factors: the factors' names; ``effect`` their positions (:func:`realpen.stats.contrasts.effects`).
+        n: the number of subjects.
+        numbers: the effect's ``F``, ``df1``, ``df2``, ``p``, ``ges``, ``eps_gg``, ``eps_hf``,
+            ``mauchly_w``, ``p_mauchly``, ``ss`` and ``ss_error`` (sums of squares in the
+            squared unit of the values).
+        zero: sums of squares at or below this are rounding dust (same unit): without error
+            variance F is inf (p = 0), without any variance NaN, both with NaN ε and Mauchly,
+            and ``method`` says so.
+        source: how the numbers were computed, the start of ``method``.
+    """
+    f_value, df1, df2, p = (numbers[key] for key in ("F", "df1", "df2", "p"))
+    name = effect_name(factors, effect)
+    if numbers["ss_error"] <= zero:
+        # Floating-point dust, not data: an F of 1e30 or 0.18 from 1e-30/1e-29 would mislead.
+        no_effect = numbers["ss"] <= zero
+        f_value, p = (math.nan, math.nan) if no_effect else (math.inf, 0.0)
+        return _result_row("RM-ANOVA", "F", f_value, p, n=n, df1=df1, df2=df2,
+                           method=source + ("; no within-subject variation: F undefined"
+                                            if no_effect else "; no error variance: F infinite")
+                           + "; epsilon and Mauchly undefined",
+                           effect_size_name="ges", effect_size=numbers["ges"], effect=name,
+                           eps_gg=math.nan, eps_hf=math.nan, p_gg=p, p_hf=p, mauchly_w=math.nan,
+                           p_mauchly=math.nan, sphericity=False)
+    method = source
+    if df1 <= 1:
+        eps_gg = eps_hf = 1.0
+        mauchly_w = p_mauchly = math.nan
+        sphericity = True
+        method += "; 2 levels: sphericity holds trivially (epsilon = 1)"
+    else:
+        eps_gg, eps_hf = numbers["eps_gg"], numbers["eps_hf"]
+        mauchly_w, p_mauchly = numbers["mauchly_w"], numbers["p_mauchly"]
+        if n - 1 < df1:
+            # Mauchly's test needs the contrasts' covariance to have full rank.
+            mauchly_w = p_mauchly = math.nan
+            method += (f"; Mauchly's test untestable: {n} subjects give n - 1 < {df1:g} "
+                       f"contrasts")
+        sphericity = bool(p_mauchly > SPHERICITY_ALPHA)  # False when untestable (NaN)
+    p_gg = float(scipy.stats.f.sf(f_value, df1 * eps_gg, df2 * eps_gg))
+    p_hf = float(scipy.stats.f.sf(f_value, df1 * eps_hf, df2 * eps_hf))
+    return _result_row("RM-ANOVA", "F", f_value, p, n=n, method=method, df1=df1, df2=df2,
+                       effect_size_name="ges", effect_size=numbers["ges"], effect=name,
+                       eps_gg=eps_gg, eps_hf=eps_hf, p_gg=p_gg, p_hf=p_hf, mauchly_w=mauchly_w,
+                       p_mauchly=p_mauchly, sphericity=sphericity)
 
 
 def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: str = "t",
@@ -283,6 +310,8 @@ def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: st
     levels = list(means.columns)
     pairs = list(itertools.combinations(levels, 2))
     averaged = f" on each subject's mean over {', '.join(others)}" if others else ""
+    if test == "t":
+        import pingouin as pg
     rows = []
     for a, b in pairs:
         x, y = means[a].to_numpy(), means[b].to_numpy()
@@ -321,6 +350,8 @@ def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: st
     adjusted = p_values.copy()
     tested = np.isfinite(p_values)
     if adjust != "none" and tested.any():
+        from statsmodels.stats.multitest import multipletests
+
         adjusted[tested] = multipletests(p_values[tested], method=adjust)[1]
     if adjust == "none":
         family = "; no multiplicity adjustment"

@@ -2,7 +2,8 @@
 
 :func:`aligned_rank_transform` aligns and ranks the responses for each main effect and
 interaction of one to three within-subject factors (Wobbrock et al. 2011, as the ARTool R
-package) and analyses the ranks by the repeated-measures ANOVA of :mod:`realpen.stats.anova`.
+package) and analyses the ranks by a repeated-measures ANOVA of every effect's ranks at once
+(:func:`realpen.stats.contrasts.contrast_anova`; rows as :mod:`realpen.stats.anova` gives them).
 The one-factor rank tests (Friedman, Wilcoxon) are :mod:`realpen.stats.nonparametric`.
 """
 
@@ -14,9 +15,9 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 
-from realpen.stats.anova import rm_anova_table
-from realpen.stats.contrasts import ZERO_FRACTION, anovarm_f, contrast_decomposition, effect_name, effects
-from realpen.stats.long import balanced_wide, factor_list, safe_long
+from realpen.stats.anova import CONTRAST_SOURCE, effect_row
+from realpen.stats.contrasts import ZERO_FRACTION, contrast_anova, effects
+from realpen.stats.long import balanced_wide, factor_list
 from realpen.stats.results import tidy
 
 __all__ = ["aligned_rank_transform"]
@@ -39,9 +40,11 @@ def aligned_rank_transform(data: pd.DataFrame, *, dv: str, within: list[str], su
     estimate (for A: mean_A − grand mean; for A:B: mean_AB − mean_A − mean_B + grand mean; the
     three-way one likewise by inclusion–exclusion), as Wobbrock et al. (2011) and the ARTool R
     package (Kay et al.) do. The aligned responses are ranked over all observations (average
-    ranks for ties; :func:`scipy.stats.rankdata`) and the ranks analysed by
-    :func:`realpen.stats.anova.rm_anova` (statsmodels AnovaRM), of which only that effect's row
-    is kept.
+    ranks for ties; :func:`scipy.stats.rankdata`) and the ranks analysed by a repeated-measures
+    ANOVA, of which only that effect's row is kept. All effects' ANOVAs run at once from
+    orthonormal contrasts (:func:`realpen.stats.contrasts.contrast_anova`: each effect against
+    its own effect × subject error, F and p as statsmodels' AnovaRM gives them, ε and Mauchly
+    as :func:`realpen.stats.anova.rm_anova`).
 
     ``aligned_check`` is ARTool's correctness check: the largest |F| of the *other* effects in
     a repeated-measures ANOVA of that effect's aligned, unranked responses, which must be ~0
@@ -87,59 +90,69 @@ def aligned_rank_transform(data: pd.DataFrame, *, dv: str, within: list[str], su
     """
     factors = factor_list(within)
     wide = balanced_wide(data, dv=dv, within=factors, subject=subject)
-    long = safe_long(wide)
-    codes = [f"f{j}" for j in range(len(factors))]
-    y = long["y"].to_numpy(dtype=float)
-    residual = y - long.groupby(codes, sort=False)["y"].transform("mean").to_numpy()
-    grand = y.mean()
-    means: dict[tuple[int, ...], np.ndarray] = {(): np.full(len(y), grand)}
-    for effect in effects(factors):
-        means[effect] = long.groupby([codes[j] for j in effect], sort=False)["y"].transform("mean").to_numpy()
+    y = wide.to_numpy(dtype=float)
+    n = len(y)
+    sizes = [len(level) for level in wide.columns.levels]
+    aligned = _aligned(y.reshape(n, *sizes)).reshape(-1, *y.shape)  # effects × subjects × cells
+    ranked = np.stack([scipy.stats.rankdata(_ranking_precision(one).ravel()).reshape(y.shape)
+                       for one in aligned])
+    rank_anova = contrast_anova(ranked, sizes)
+    checks = _aligned_checks(aligned, sizes)
     rows = []
-    for effect in effects(factors):
-        estimate = np.zeros(len(y))
-        for subset in [(), *[e for e in effects(factors) if set(e) <= set(effect)]]:
-            estimate += (-1) ** (len(effect) - len(subset)) * means[subset]
-        aligned = residual + estimate
-        ranked = long.assign(y=scipy.stats.rankdata(_ranking_precision(aligned)))
-        name = effect_name(factors, effect)
-        table = _rank_anova(ranked, factors)
-        row = table.loc[table["effect"] == name].iloc[0].to_dict()
-        row.update(test="ART RM-ANOVA", aligned_check=_aligned_check(long.assign(y=aligned), effect),
+    for index, effect in enumerate(effects(factors)):
+        numbers = {key: float(value[index]) if np.ndim(value) else float(value)
+                   for key, value in rank_anova[effect].items()}
+        row = effect_row(factors, effect, n=n, numbers=numbers,
+                         zero=ZERO_FRACTION * float((ranked[index] ** 2).sum()),
+                         source=CONTRAST_SOURCE)
+        row.update(test="ART RM-ANOVA", aligned_check=checks[index],
                    method="aligned rank transform (Wobbrock et al. 2011, as ARTool): aligned "
                           "responses ranked with average ties, then " + row["method"])
         rows.append(row)
     return tidy(rows)
 
 
-def _aligned_check(aligned: pd.DataFrame, effect: tuple[int, ...]) -> float:
-    """The largest |F| of the effects other than ``effect`` in statsmodels' AnovaRM of the
-    aligned responses (a :func:`realpen.stats.long.safe_long` frame); NaN when there is no other effect.
+def _aligned(cube: np.ndarray) -> np.ndarray:
+    """The aligned responses of every effect (effects × the shape of ``cube``): the residual of
+    the cell-means model plus the effect's estimate, by inclusion–exclusion over the means of
+    the effect's factor subsets (``cube``: subjects × levels of each factor)."""
+    factor_axes = range(1, cube.ndim)
+    means: dict[tuple[int, ...], np.ndarray] = {}
+    for subset in [(), *effects(factor_axes)]:
+        # The mean over subjects and the factors outside the subset, at every observation.
+        averaged = (0, *(axis for axis in factor_axes if axis - 1 not in subset))
+        means[subset] = cube.mean(axis=averaged, keepdims=True)
+    residual = cube - means[tuple(range(cube.ndim - 1))]
+    aligned = []
+    for effect in effects(factor_axes):
+        estimate = np.zeros_like(cube)
+        for subset in [(), *[e for e in effects(factor_axes) if set(e) <= set(effect)]]:
+            estimate = estimate + (-1) ** (len(effect) - len(subset)) * means[subset]
+        aligned.append(residual + estimate)
+    return np.stack(aligned)
+
+
+def _aligned_checks(aligned: np.ndarray, sizes: list[int]) -> list[float]:
+    """Per effect, the largest |F| of the other effects in the ANOVA of its aligned responses
+    (``aligned``: effects × subjects × cells); NaN when there is no other effect.
 
     An effect whose error sum of squares is rounding dust gets F = 0 when its own is dust too
     (0/0: nothing left, as the check wants) and inf otherwise (a failed alignment)."""
-    codes = [column for column in aligned.columns if column.startswith("f")]
-    if len(codes) == 1:
-        return math.nan
-    with np.errstate(invalid="ignore", divide="ignore"):
-        table = anovarm_f(aligned, len(codes))
-    wide = aligned.set_index(["s", *codes])["y"].unstack(codes)
-    parts = contrast_decomposition(wide)
-    zero = ZERO_FRACTION * float((aligned["y"] ** 2).sum())
-    largest = math.nan
-    for other, (f_value, *_rest) in table.items():
-        if other == effect:
-            continue
-        if parts[other]["ss_error"] <= zero:
-            f_value = 0.0 if parts[other]["ss"] <= zero else math.inf
-        largest = abs(f_value) if math.isnan(largest) else max(largest, abs(f_value))
-    return largest
-
-
-def _rank_anova(ranked: pd.DataFrame, factors: list[str]) -> pd.DataFrame:
-    """:func:`realpen.stats.anova.rm_anova` of a :func:`realpen.stats.long.safe_long` frame, its
-    effects renamed to ``factors``'."""
-    codes = [f"f{j}" for j in range(len(factors))]
-    table = rm_anova_table(ranked, dv="y", within=codes, subject="s", with_pingouin=False)
-    names = {effect_name(codes, effect): effect_name(factors, effect) for effect in effects(factors)}
-    return table.assign(effect=table["effect"].map(names))
+    every = effects(sizes)
+    if len(every) == 1:
+        return [math.nan]
+    anova = contrast_anova(aligned, sizes)
+    zero = ZERO_FRACTION * (aligned ** 2).sum(axis=(-2, -1))
+    checks = []
+    for index, effect in enumerate(every):
+        largest = math.nan
+        for other in every:
+            if other == effect:
+                continue
+            part = anova[other]
+            f_value = float(part["F"][index])
+            if part["ss_error"][index] <= zero[index]:
+                f_value = 0.0 if part["ss"][index] <= zero[index] else math.inf
+            largest = abs(f_value) if math.isnan(largest) else max(largest, abs(f_value))
+        checks.append(largest)
+    return checks

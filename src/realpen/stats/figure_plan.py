@@ -3,8 +3,9 @@
 :func:`study_figure_names` lists every figure that applies to an analysis (the paper's Figures
 7, 10, 11 and 12 for the built-in studies; means, confusion and response times for another
 design; each participant's own data; the power plot), :func:`figure_caption` words each one
-for the report, and :func:`save_study_figures` draws them (:mod:`realpen.stats.figures`,
-:mod:`realpen.stats.power_plot`) and writes them as PNG (150 dpi) and SVG, all or nothing.
+for the report (:func:`figure_captions`: all of them at once), and :func:`save_study_figures`
+draws them (:mod:`realpen.stats.figures`, :mod:`realpen.stats.power_plot`) and writes them as
+PNG (150 dpi) and SVG, all or nothing.
 
 May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.display` and the figure
 modules of :mod:`realpen.stats` (and pandas).
@@ -37,7 +38,7 @@ from realpen.stats.figure_data import (
 from realpen.stats.figures import figure7, figure10, figure11, figure12, means_figure, participants_figure
 from realpen.stats.power_plot import has_power_figure, power_figure, split_power
 
-__all__ = ["study_figure_names", "figure_caption", "save_study_figures"]
+__all__ = ["study_figure_names", "figure_caption", "figure_captions", "save_study_figures"]
 
 
 def _file_stem(name: str) -> str:
@@ -85,6 +86,12 @@ def figure_caption(name: str, analysis) -> str:
             return caption
     raise ParameterError("name", f"no figure {name!r} for this analysis (it has "
                                  f"{', '.join(study_figure_names(analysis)) or 'none'})")
+
+
+def figure_captions(analysis) -> dict[str, str]:
+    """The caption (plain text) of every figure of :func:`study_figure_names`, by name, in
+    report order: :func:`figure_caption` of each, the analysis's tables read once."""
+    return {name: caption for name, _, caption in _figure_plan(analysis)}
 
 
 def _ci_words(cells: pd.DataFrame, outcomes: Iterable[str]) -> str:

@@ -44,6 +44,7 @@ from realpen.display.charts import (
     label_text,
     level_axis,
     likert_limits,
+    panel_title,
     panels,
     style_axes,
 )
@@ -122,7 +123,7 @@ def figure7(analysis, ax: Axes | Sequence[Axes] | None = None, *,
         values = np.concatenate([rows["mean"].to_numpy(float), matrix.to_numpy(float).ravel()])
         axis.set_ylim(*likert_limits(values))
         axis.set_ylabel(axis_label(analysis, outcome, LIKERT_UNIT))
-        axis.set_title(outcome_label(analysis, outcome))
+        panel_title(axis, outcome_label(analysis, outcome), own=own)
     if own:
         axes[0].figure.suptitle("mean ± 95 % CI per condition (grey: each participant)",
                                 fontsize="medium")
@@ -184,7 +185,7 @@ def figure10(analysis, ax: Axes | Sequence[Axes] | None = None) -> Figure:
         total = np.nansum(counts.to_numpy(float))
         right = sum(np.nan_to_num(counts.at[pen, pen]) for pen in pens if pen in chosen)
         rate = f"{100.0 * right / total:.1f} % correct" if total > 0 else "no answers"
-        axis.set_title(f"{label_text(modality)}: {rate}")
+        panel_title(axis, f"{label_text(modality)}: {rate}", own=own)
         axis.set_xticks(range(len(chosen)), [label_text(name) for name in chosen])
         axis.set_yticks(range(len(pens)), [label_text(name) for name in pens])
         axis.set_xlabel("pen chosen")
@@ -256,7 +257,8 @@ def figure11(analysis, ax: Axes | None = None) -> Figure:
     level_axis(axis, modalities, "modality")
     axis.set_ylabel("response time (ms)")
     axis.legend(title="pen", frameon=False, loc="best", fontsize="small")
-    axis.set_title("response time per modality × pen: geometric mean ± 95 % CI")
+    panel_title(axis, "response time per modality × pen: geometric mean ± 95 % CI",
+                own=ax is None)
     return axis.figure
 
 
@@ -305,7 +307,7 @@ def figure12(analysis, ax: Axes | Sequence[Axes] | None = None) -> Figure:
         draw_mean_ci(axis, x, rows)
         style_axes(axis)
         level_axis(axis, modalities, "modality", rotate=True)
-        axis.set_title(label_text(item))
+        panel_title(axis, label_text(item), own=own)
         everything += list(rows["mean"]) + list(matrix.to_numpy(float).ravel())
     limits = likert_limits(everything)
     for k, axis in enumerate(axes):
@@ -412,7 +414,7 @@ def participants_figure(analysis, outcome: str, ax: Sequence[Axes] | None = None
             axis.plot(x, matrix.loc[person].to_numpy(float), color=PALETTE[0], marker="o",
                       ms=3.5, lw=1.4, zorder=3, label="participant")
         style_axes(axis)
-        axis.set_title(label_text(person), fontsize="small")
+        panel_title(axis, label_text(person), own=own, fontsize="small")
         axis.set_ylim(*limits)
         axis.set_xticks(range(len(ticks)), [label_text(t) for t in ticks], fontsize="small",
                         rotation=30 if tilt else 0, ha="right" if tilt else "center")
@@ -457,9 +459,9 @@ def _one_level(analysis, outcome: str, factor: str, matrix: pd.DataFrame, unit: 
         axis.set_ylim(*likert_limits(values))
     axis.set_xlabel("participant")
     axis.set_ylabel(axis_label(analysis, outcome, unit))
-    axis.set_title(f"{outcome_label(analysis, outcome)} ({factor_label(factor)} "
-                   f"{label_text(matrix.columns[0])} only): each participant (dashed: group mean)",
-                   fontsize="medium")
+    panel_title(axis, f"{outcome_label(analysis, outcome)} ({factor_label(factor)} "
+                      f"{label_text(matrix.columns[0])} only): each participant (dashed: group "
+                      "mean)", own=ax is None, fontsize="medium")
     return axis.figure
 
 

@@ -13,7 +13,6 @@ import math
 
 import numpy as np
 import pandas as pd
-import pingouin as pg
 import scipy.stats
 
 from realpen.checks import require_choice
@@ -97,6 +96,8 @@ def friedman(data: pd.DataFrame, *, dv: str, within: str, subject: str) -> pd.Da
         chi2, p = float(result.statistic), float(result.pvalue)
         method = "scipy.stats.friedmanchisquare (tie-corrected chi2); kendall_w = chi2 / (n (k - 1))"
     else:
+        import pingouin as pg  # only here: it brings pyplot, seaborn and xarray with it
+
         frame = pd.DataFrame(values).rename_axis(index="block", columns="level").stack().rename("y")
         result = pg.friedman(frame.reset_index(), dv="y", within="level", subject="block").iloc[0]
         chi2, p = float(result["Q"]), float(result["p_unc"])

@@ -26,7 +26,7 @@ import pandas as pd
 
 from realpen.errors import ParameterError, fail
 from realpen.io.files import atomic_path
-from realpen.stats.figure_plan import figure_caption, study_figure_names
+from realpen.stats.figure_plan import figure_captions
 from realpen.stats.power_plot import split_power
 from realpen.stats.results import PAPER_COMPATIBLE, RESULT_COLUMNS
 from realpen.stats.texts import software_versions
@@ -324,9 +324,9 @@ def _figures_section(analysis, figures: Sequence[str | os.PathLike]) -> str:
     parts = ['<section id="figures"><h2>Figures</h2>']
     if not chosen:
         parts.append('<p class="muted">No figures.</p>')
-    known = set(study_figure_names(analysis))
+    captions = figure_captions(analysis)
     for name, path in chosen.items():
-        caption = figure_caption(name, analysis) if name in known else name
+        caption = captions.get(name, name)
         data = base64.b64encode(path.read_bytes()).decode("ascii")
         parts.append(f'<figure id="figure-{_e(name)}"><img src="data:{_MIME[path.suffix.lower()]};'
                      f'base64,{data}" alt="{_e(caption)}"><figcaption>{_caption_html(name, caption)}'

@@ -78,7 +78,8 @@ def methods_paragraphs(analysis: StudyAnalysis, trials: Trials, found: list[Outc
                      f"tested with the aligned rank transform (Wobbrock et al., CHI 2011) on "
                      f"each participant's mean per condition: responses aligned for each "
                      f"effect, ranked, and analysed by a repeated-measures ANOVA of the ranks "
-                     f"(statsmodels AnovaRM) in which each effect is tested against its own "
+                     f"(from orthonormal contrasts; the univariate test of statsmodels AnovaRM) "
+                     f"in which each effect is tested against its own "
                      f"effect × participant error (ARTool's Error(S) model pools these errors "
                      f"and so reports larger error df).")
         elif any(len(o.factors) == 2 for o in found if o.kind == "likert"):

@@ -1,0 +1,218 @@
+"""CPU time of `realpen stats` (the report) on simulated study 1 and study 2 data, and where it goes.
+
+Target (issue 23): `realpen stats study2` on the simulated study in half the time it took before
+the figures were drawn once per view and the aligned-rank-transform ANOVA went through the
+vectorised repeated-measures code. Give ``--before SRC`` (the ``src`` folder of an older
+checkout, e.g. from ``git archive``) to measure both in one run, round robin.
+
+Each report runs in a fresh process: ``python -c RUNNER`` with the measured ``src`` first on
+``PYTHONPATH`` (this venv's libraries), which runs ``realpen stats DESIGN trials.csv -o DIR
+--force`` through the real command line. Process CPU (user + system) comes from ``os.wait4``;
+inside, the runner reads its own CPU clock around
+
+- start-up: the interpreter and ``realpen.cli``;
+- imports: the modules the command imports when it runs (the statistics, the study designs,
+  matplotlib through the figure modules), imported first so they can be timed apart;
+- statistics: ``read_trials`` and ``analyse``; power: ``report_power`` (the report's
+  smallest-detectable-effect search, ``--power-sims`` 200 by default);
+- figures: ``save_study_figures`` (drawing and rendering every PNG and SVG); report:
+  ``write_report`` (report.html); other: the rest (tables, the folder swap, the command line).
+
+With ``--before``, the two report folders of the last round are compared: the same files, the
+same PNG bytes and the same SVG (ids matplotlib draws at random made equal) and CSV text. The
+machine's load is printed before and after: a busy machine adds CPU time to every figure alike.
+
+Usage: python benchmarks/bench_stats.py [--repeats 3] [--participants 12] [--before OLD/src]
+       [--after NEW/src] [--studies study1 study2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+GOAL = 0.5  # study 2's CPU after / before
+MARK = "BENCH-STATS "
+PHASES = ("start-up", "imports", "statistics", "power", "figures", "report", "other")
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+RUNNER = r'''
+import json, resource, sys
+
+def cpu():
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+import realpen.cli
+started = cpu()
+import realpen.io.files, realpen.study.design
+import realpen.stats.analyses, realpen.stats.data, realpen.stats.outputs, realpen.stats.power
+import realpen.stats.figure_plan, realpen.stats.report
+imported = cpu()
+spent = dict.fromkeys(("statistics", "power", "figures", "report"), 0.0)
+
+def timed(module, name, phase):
+    function = getattr(module, name)
+    def wrapper(*args, **kwargs):
+        before = cpu()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            spent[phase] += cpu() - before
+    setattr(module, name, wrapper)
+
+timed(realpen.stats.data, "read_trials", "statistics")
+timed(realpen.stats.analyses, "analyse", "statistics")
+timed(realpen.stats.power, "report_power", "power")
+timed(realpen.stats.figure_plan, "save_study_figures", "figures")
+timed(realpen.stats.report, "write_report", "report")
+try:
+    realpen.cli.main(sys.argv[1:])
+    code = 0
+except SystemExit as stop:
+    code = stop.code or 0
+finished = cpu()
+print("''' + MARK + r'''" + json.dumps({"code": code, "start-up": started, "imports": imported - started,
+                                 **spent, "in-process": finished}), flush=True)
+'''
+
+
+def load() -> str:
+    try:
+        return " ".join(f"{value:.2f}" for value in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
+def child_environment(src: Path) -> dict[str, str]:
+    environment = dict(os.environ)
+    environment["PYTHONPATH"] = os.pathsep.join([str(src), *filter(None, [os.environ.get("PYTHONPATH")])])
+    environment.pop("PYTHONDONTWRITEBYTECODE", None)
+    return environment
+
+
+def wait_cpu(process: subprocess.Popen) -> tuple[int, float]:
+    """Wait for ``process`` and return its exit code and CPU seconds (user + system)."""
+    _, status, usage = os.wait4(process.pid, 0)
+    return os.waitstatus_to_exitcode(status), usage.ru_utime + usage.ru_stime
+
+
+def measured(src: Path, design: str, trials: Path, output: Path) -> dict[str, float]:
+    """One ``realpen stats`` in a fresh process: its phases and its process CPU (from
+    ``os.wait4``, the interpreter's start-up included), in seconds."""
+    process = subprocess.Popen([sys.executable, "-c", RUNNER, "stats", design, str(trials), "-o",
+                                str(output), "--force"], env=child_environment(src),
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    stdout = process.stdout.read()
+    stderr = process.stderr.read()
+    code, total = wait_cpu(process)
+    lines = [line for line in stdout.splitlines() if line.startswith(MARK)]
+    if code or not lines:
+        raise SystemExit(f"realpen stats {design} ({src}) exited {code}:\n{stderr}")
+    phases = json.loads(lines[-1][len(MARK):])
+    phases["total"] = total
+    phases["start-up"] += total - phases["in-process"]  # the interpreter before the runner's clock
+    phases["other"] = total - sum(phases[name] for name in PHASES if name != "other")
+    return phases
+
+
+def svg_text(data: bytes) -> str:
+    """An SVG with the ids matplotlib draws at random numbered in order of appearance."""
+    seen: dict[str, str] = {}
+    return re.sub(r"\b(?:[mpc]|image)[0-9a-f]{10}\b",
+                  lambda match: seen.setdefault(match.group(0), f"id{len(seen)}"),
+                  data.decode("utf-8"))
+
+
+def compare_folders(before: Path, after: Path) -> list[str]:
+    """What differs between two report folders (figures by bytes, SVG ids aside; text files
+    by line)."""
+    names = {path.name for path in before.iterdir()} | {path.name for path in after.iterdir()}
+    differences = []
+    for name in sorted(names):
+        old, new = before / name, after / name
+        if not old.exists() or not new.exists():
+            differences.append(f"{name}: only {'after' if new.exists() else 'before'}")
+        elif name.endswith(".png"):
+            if old.read_bytes() != new.read_bytes():
+                differences.append(f"{name}: other pixels or bytes")
+        elif name.endswith(".svg"):
+            if svg_text(old.read_bytes()) != svg_text(new.read_bytes()):
+                differences.append(f"{name}: other drawing")
+        elif name.endswith(".csv"):
+            lines = [(a, b) for a, b in zip(old.read_text().splitlines(), new.read_text().splitlines())
+                     if a != b]
+            if lines or len(old.read_text().splitlines()) != len(new.read_text().splitlines()):
+                differences.append(f"{name}: {len(lines)} line(s) differ")
+    return differences
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--repeats", type=int, default=3, help="runs of each report (median shown)")
+    parser.add_argument("--participants", type=int, default=12)
+    parser.add_argument("--studies", nargs="+", default=["study1", "study2"])
+    parser.add_argument("--before", type=Path, help="the src folder of the code to compare with")
+    parser.add_argument("--after", type=Path, default=SRC,
+                        help="the src folder of the code to measure (default: this checkout's)")
+    args = parser.parse_args()
+    for src in filter(None, (args.before, args.after)):
+        if not (src / "realpen" / "__init__.py").is_file():
+            raise SystemExit(f"{src}: not a src folder with realpen in it")
+    trees = {"after": args.after.resolve()}
+    if args.before is not None:
+        trees = {"before": args.before.resolve(), "after": args.after.resolve()}
+    for src in trees.values():  # bytecode caches first, as installing writes them
+        subprocess.run([sys.executable, "-m", "compileall", "-q", str(src / "realpen")], check=True,
+                       env=child_environment(src), stdout=subprocess.DEVNULL)
+    print(f"load before: {load()}")
+    runs: dict[tuple[str, str], list[dict[str, float]]] = {}
+    with tempfile.TemporaryDirectory(prefix="bench-stats-") as folder:
+        work = Path(folder)
+        trials = {}
+        for design in args.studies:
+            trials[design] = work / f"{design}.csv"
+            subprocess.run([sys.executable, "-m", "realpen", "stats", "simulate", design, "-n",
+                            str(args.participants), "-o", str(trials[design])], check=True,
+                           env=child_environment(trees["after"]), stdout=subprocess.DEVNULL)
+        for _ in range(args.repeats):
+            for design in args.studies:
+                for label, src in trees.items():
+                    runs.setdefault((design, label), []).append(
+                        measured(src, design, trials[design], work / f"{design}-{label}"))
+        compared = {design: compare_folders(work / f"{design}-before", work / f"{design}-after")
+                    for design in args.studies if "before" in trees}
+    print(f"load after: {load()}")
+    print(f"\nrealpen stats DESIGN trials.csv -o DIR, {args.participants} simulated participants: "
+          f"process CPU in s, median of {args.repeats} (a fresh process each, round robin)")
+    header = f"{'':16}{'total':>8}" + "".join(f"{name:>12}" for name in PHASES)
+    print(header)
+    medians = {}
+    for (design, label), found in runs.items():
+        median = {name: statistics.median(run[name] for run in found) for name in ("total", *PHASES)}
+        medians[design, label] = median
+        print(f"{design + ' ' + label:16}{median['total']:8.2f}"
+              + "".join(f"{median[name]:12.2f}" for name in PHASES))
+        print(f"{'':16}{'':8}" + "".join(f"{100 * median[name] / median['total']:11.0f}%"
+                                         for name in PHASES))
+    if "before" in trees:
+        print()
+        for design in args.studies:
+            ratio = medians[design, "after"]["total"] / medians[design, "before"]["total"]
+            goal = f" (goal ≤ {GOAL:g})" if design == "study2" else ""
+            print(f"{design}: after / before = {ratio:.2f}{goal}; outputs: "
+                  + ("the same" if not compared[design] else "; ".join(compared[design])))
+
+
+if __name__ == "__main__":
+    main()
