@@ -15,7 +15,6 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d
 
 from realpen.checks import (
     MAX_SUBPATTERNS,
@@ -252,78 +251,97 @@ def check_unit_count(units: int, unit_ms: float, source: object) -> None:
                                         f"or a shorter recording")
 
 
-def _neighbourhood_max(power: np.ndarray, half_width: int) -> np.ndarray:
-    """The largest power within ± ``half_width`` bins of each bin (powers are ≥ 0, so the edges
-    need no padding value)."""
-    if half_width > 3:
-        return maximum_filter1d(power, size=2 * half_width + 1, axis=1, mode="constant",
-                                cval=0.0)
-    # A few shifted maxima are cheaper than the filter for the narrow neighbourhoods of short
-    # padded spectra (the streamed analysis's 129 bins have a half-width of 2).
-    out = power.copy()
-    for shift in range(1, half_width + 1):
-        np.maximum(out[:, shift:], power[:, :-shift], out=out[:, shift:])
-        np.maximum(out[:, :-shift], power[:, shift:], out=out[:, :-shift])
-    return out
+def _peak_bins(power: np.ndarray, judged: np.ndarray, in_band: np.ndarray, half_width: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, flat indices into ``power``) of every row's peaks, row by row (see
+    :func:`top_peaks`).
+
+    A peak rises from its left neighbour and is at least its right one: such local maxima are
+    few (one per window lobe at most), so the rest of the neighbourhood and the floor are
+    checked at them only, one shift at a time, rather than over every bin. A neighbour past the
+    row's end counts as zero (powers are ≥ 0): its index is clipped to the end, a bin that lies
+    in the neighbourhood anyway.
+    """
+    bins = power.shape[1]
+    band = np.flatnonzero(in_band[1:-1]) + 1  # never the first or the last bin
+    if not len(band):
+        return np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
+    first, stop = int(band[0]), int(band[-1]) + 1
+    core = power[:, first:stop]
+    local = core > power[:, first - 1:stop - 1]
+    local &= core >= power[:, first + 1:stop + 1]
+    if len(band) < stop - first:
+        local &= in_band[first:stop]
+    span = stop - first
+    index = np.flatnonzero(local)
+    row_of = index // span
+    column = index - row_of * span + first
+    index = row_of * bins + column
+    values = power.ravel()
+    peak = values[index]
+    for shift in range(2, half_width + 1):
+        keep = peak >= values[index - np.minimum(column, shift)]
+        keep &= peak >= values[index + np.minimum(bins - 1 - column, shift)]
+        row_of, column, index, peak = row_of[keep], column[keep], index[keep], peak[keep]
+    floor = np.maximum(judged.max(axis=1) * 10 ** (PEAK_FLOOR_DB / 10), _TINY)
+    keep = judged.ravel()[index] > floor[row_of]
+    return row_of[keep], index[keep]
 
 
 def top_peaks(power: np.ndarray, in_band: np.ndarray, half_width: int, top: int,
-               bin_hz: float, weight: np.ndarray | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
+              bin_hz: float, weight: np.ndarray | None = None,
+              weighted: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Strongest ``top`` peaks per row with parabolic (log-power) sub-bin interpolation.
 
     ``power`` is (rows, bins) of non-negative powers. A peak is a bin that rises from its left
-    neighbour, is the largest within ± ``half_width`` bins, lies in ``in_band`` and is above
-    :data:`PEAK_FLOOR_DB` of the row's strongest bin. Returns (frequencies in Hz, powers), each
-    (rows, top), strongest first, NaN where a row has fewer peaks.
+    neighbour, is the largest within ± ``half_width`` bins, lies in ``in_band`` (never the first
+    or the last bin) and is above :data:`PEAK_FLOOR_DB` of the row's strongest bin. Returns
+    (frequencies in Hz, powers), each (rows, top), strongest first, NaN where a row has fewer
+    peaks.
 
     ``weight`` (bins,), when given, is a power response the peaks are judged by: the floor and
     the order use ``power × weight``, while the peaks are found and interpolated in ``power``
     and returned unweighted (the caller weights them at their interpolated frequency). A steep
     response (a high-pass near its cutoff) would otherwise tilt a tone's window lobe and move
-    its peak.
+    its peak. ``weighted``, when given, is ``power × weight`` already computed (the caller
+    needs it too); ``weight`` is then not used.
     """
     rows, bins = power.shape
-    is_peak = power >= _neighbourhood_max(power, half_width)
-    is_peak[:, 1:] &= power[:, 1:] > power[:, :-1]
-    is_peak[:, 0] = False
-    is_peak &= in_band[None, :]
-    judged = power if weight is None else power * weight
-    strongest = judged.max(axis=1, keepdims=True)
-    is_peak &= judged > np.maximum(strongest * 10 ** (PEAK_FLOOR_DB / 10), _TINY)
-    is_peak[:, -1] = False
-    # Peaks are sparse (at most one in half_width + 1 bins): pack each row's peaks to the left
-    # so that the partial sort looks at a few dozen candidates instead of every bin.
-    row_of, column_of = np.nonzero(is_peak)
+    if weighted is not None:
+        judged = weighted
+    else:
+        judged = power if weight is None else power * weight
+    power = np.ascontiguousarray(power)
+    judged = np.ascontiguousarray(judged)
+    row_of, index = _peak_bins(power, judged, in_band, half_width)
+    # Peaks are sparse (at most one in half_width + 1 bins): each row's are packed to the left
+    # so that the sort looks at a few dozen candidates instead of every bin.
     counts = np.bincount(row_of, minlength=rows)
     width = max(int(counts.max(initial=0)), 1)
-    slot = np.arange(len(row_of)) - (np.cumsum(counts) - counts)[row_of]
-    candidates = np.full((rows, width), -np.inf)
-    candidates[row_of, slot] = judged[row_of, column_of]
-    columns = np.zeros((rows, width), dtype=np.intp)
-    columns[row_of, slot] = column_of
+    slot = row_of * width + np.arange(len(index)) - (np.cumsum(counts) - counts)[row_of]
+    candidates = np.full(rows * width, -np.inf)
+    candidates[slot] = judged.ravel()[index]
+    where = np.zeros(rows * width, dtype=np.intp)
+    where[slot] = index
+    candidates, where = candidates.reshape(rows, width), where.reshape(rows, width)
     take = min(top, width)
-    if take < width:
-        pick = np.argpartition(-candidates, take - 1, axis=1)[:, :take]
-    else:
-        pick = np.broadcast_to(np.arange(width), (rows, width))
-    order = np.argsort(-np.take_along_axis(candidates, pick, axis=1), axis=1)
-    pick = np.take_along_axis(pick, order, axis=1)
-    valid = np.isfinite(np.take_along_axis(candidates, pick, axis=1))
-    index = np.take_along_axis(columns, pick, axis=1)
-    row = np.arange(rows)[:, None]
-    safe = np.clip(index, 1, bins - 2)
-    alpha, beta, gamma = (10 * np.log10(power[row, safe + shift] + _TINY) for shift in (-1, 0, 1))
-    curvature = alpha - 2 * beta + gamma
-    offset = np.where(curvature < 0, 0.5 * (alpha - gamma) / np.where(curvature < 0, curvature, -1),
+    order = np.argsort(-candidates, axis=1)[:, :take]
+    valid = np.isfinite(np.take_along_axis(candidates, order, axis=1))
+    index = np.take_along_axis(where, order, axis=1)[valid]  # strongest first in each row
+    # The parabola through the three log powers around each peak, in natural-log ratios to
+    # the peak's own bin: the vertex's offset does not depend on the logarithm's base.
+    values = power.ravel()
+    centre = values[index] + _TINY
+    below = np.log((values[index - 1] + _TINY) / centre)
+    above = np.log((values[index + 1] + _TINY) / centre)
+    curvature = below + above
+    offset = np.where(curvature < 0, 0.5 * (below - above) / np.where(curvature < 0, curvature, -1),
                       0.0)
     offset = np.clip(offset, -0.5, 0.5)
-    peak_db = beta - 0.25 * (alpha - gamma) * offset
-    frequencies = np.where(valid, (safe + offset) * bin_hz, np.nan)
-    powers = np.where(valid, 10 ** (peak_db / 10), np.nan)
-    if take < top:
-        pad = np.full((rows, top - take), np.nan)
-        frequencies, powers = np.hstack([frequencies, pad]), np.hstack([powers, pad])
+    frequencies = np.full((rows, top), np.nan)
+    powers = np.full((rows, top), np.nan)
+    frequencies[:, :take][valid] = (index % bins + offset) * bin_hz
+    powers[:, :take][valid] = centre * np.exp(-0.25 * (below - above) * offset)
     return frequencies, powers
 
 

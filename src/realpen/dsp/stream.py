@@ -8,10 +8,13 @@ the recording (only the per-unit results do) and the work is one short FFT per u
 1. per unit and axis: remove the unit's trend up to a parabola (its mean, and the slow hand
    motion the whole-signal high-pass would have removed before any window), apply the Hann
    window, ``rfft`` zero-padded to :func:`unit_fft_size` (the power of two ≥ 1.5 times the
-   unit: 256 points for 134 samples);
+   unit: 256 points for 134 samples). The trend's removal is linear, so it is folded into the
+   windowing: the windowed samples, less the windowed polynomials weighted by the trend's
+   coefficients (one matrix product for a whole batch of units and axes), are written straight
+   into the zero-padded FFT input; the window carries the power scale;
 2. DFT321: the unit's power spectrum is the sum over the axes of ``|U_i(f)|²`` — exactly the
    spectral energy the DFT321 signal keeps (Landin et al., 2010), without its phase, which no
-   power spectrum uses;
+   power spectrum uses (squared and summed over the axes in one pass);
 3. the 30 Hz high-pass as its power response: a 4th-order Butterworth run forward and backward
    (:func:`realpen.dsp.filters.highpass`) scales a tone's power by ``|H(f)|⁴`` at its own
    frequency. Peaks are found in the unfiltered unit spectrum, ranked by their filtered power
@@ -65,11 +68,12 @@ __all__ = ["analyze_stream", "analyze_units", "combined_name", "unit_fft_size", 
            "SILENCE_DB", "TREND_ORDER"]
 
 UNIT_BATCH = 512
-"""Units transformed together: large enough to amortise numpy's per-call cost, small enough
-that a batch's spectra stay in the CPU's cache (512 × 3 axes × 256 points)."""
+"""Units transformed together: large enough to amortise numpy's per-call cost (some thirty
+calls a batch), small enough that a batch's work space stays a few megabytes (512 × 3 axes ×
+256 points), allocated once per analysis."""
 
 SILENCE_DB = -80.0  # as realpen.dsp.filters.SILENCE_DB: vibration this far below the peak is none
-_HIGHPASS_ORDER = 4  # one pass of realpen.dsp.filters.highpass
+_HIGHPASS_ORDER = 4  # one pass of realpen.dsp.filters.highpass (gain squares thrice)
 TREND_ORDER = 2
 """Degree of the polynomial trend removed from each unit with a high-pass (2: a parabola);
 without one (``highpass_hz=0``) only the mean is removed."""
@@ -84,7 +88,12 @@ def unit_fft_size(unit_samples: int) -> int:
     power within 0.05 dB (0.003 bins and 0.02 dB at 134 samples in 256 points, 0.03 Hz at
     1344 Hz); more padding gains nothing the method can use (the tone's own image at negative
     frequency already limits it to 0.0015 bins), less loses it quickly (0.02 bins and 0.4 dB
-    without padding).
+    without padding; 0.0047 bins and 0.058 dB at 192 points).
+
+    The power of two is also the fastest length that keeps this accuracy: numpy's FFT costs
+    about as much at 256 points as at any other length from 1.5 units up (216, 225, 240 and
+    250 measured within the noise of a shared machine, 201 three times as long), and a tenth
+    of the streamed analysis's time at most separates any of them.
     """
     return max(16, 1 << int(np.ceil(np.log2(1.5 * unit_samples))))
 
@@ -94,7 +103,7 @@ class _Plan:
 
     def __init__(self, rate: float, unit_samples: int, unit_ms: float, top: int, fmin: float,
                  fmax: float, highpass_hz: float, min_separation_hz: float | None,
-                 combine: str | int):
+                 combine: str | int, axes: int = 1):
         self.unit_samples, self.top, self.combine = unit_samples, top, combine
         self.fmin, self.fmax = fmin, fmax
         self.nfft = unit_fft_size(unit_samples)
@@ -106,9 +115,11 @@ class _Plan:
         self.band_edges = band_edges_for(freqs, fmin, fmax)
         # The periodic Hann window of scipy.signal.get_window("hann"), and (in gain) the
         # power response of scipy.signal.butter's high-pass in closed form: the same numbers
-        # to 1e-14 without importing scipy.signal, 50 MB of resident memory.
-        self.window = 0.5 - 0.5 * np.cos(2 * np.pi * np.arange(unit_samples) / unit_samples)
-        self.scale = 2.0 / self.window.sum() ** 2  # |X|² → mean-square power of a sinusoid
+        # to 1e-14 without importing scipy.signal, 50 MB of resident memory. The window carries
+        # the square root of the power scale (|X|² → mean-square power of a sinusoid, A²/2), so
+        # that the spectra come out as powers.
+        window = 0.5 - 0.5 * np.cos(2 * np.pi * np.arange(unit_samples) / unit_samples)
+        self.window = window * np.sqrt(2.0) / window.sum()
         self.rate, self.highpass_hz = rate, highpass_hz
         self.response = self.gain(freqs)
         # The unit's trend up to a parabola is removed, not only its mean: slow hand motion
@@ -116,33 +127,54 @@ class _Plan:
         # before any window) would otherwise leak through the window into the lowest bins.
         # Without a high-pass (highpass_hz = 0) the low frequencies are wanted as they are: only
         # the mean goes, as in the whole-signal path.
-        self.trend = _orthonormal_polynomials(unit_samples, TREND_ORDER if highpass_hz > 0 else 0)
+        trend = _orthonormal_polynomials(unit_samples, TREND_ORDER if highpass_hz > 0 else 0)
+        # Removing the trend is linear: the window times (samples minus their projection on
+        # the polynomials) is the windowed samples minus the windowed polynomials weighted by
+        # the projection's coefficients. Both products are one product over a whole batch of
+        # units and axes, through numpy's own loops (einsum), not BLAS: a product that large
+        # would be shared among BLAS threads, which on a busy machine spin for ten times longer
+        # than the product takes (and one BLAS call per unit costs a fifth more).
+        self.axes = axes if combine == "dft321" else 1
+        self.trend = trend
+        self.windowed_trend = trend * self.window
         # Parseval for the one-sided padded spectrum, divided by the window's energy: the
         # mean square of the (filtered) unit, for the silence check.
         parseval = np.full(len(freqs), 2.0)
         parseval[0] = 1.0
         if self.nfft % 2 == 0:
             parseval[-1] = 1.0
-        self.mean_square = parseval / (self.nfft * np.sum(self.window ** 2) * self.scale)
+        self.mean_square = parseval / (self.nfft * np.sum(self.window ** 2))
+        # Work space reused by every batch: fresh arrays of a few megabytes each time would be
+        # mapped and faulted in anew (as costly as the FFT itself).
+        self.padded = np.zeros((0, self.axes, self.nfft))
+        self.spectrum = np.zeros((0, self.axes, len(freqs)), dtype=complex)
 
     def power(self, units: np.ndarray) -> np.ndarray:
         """Power spectra (units, bins) of units (units, unit_samples, axes), detrended and
         windowed, before the high-pass (see :meth:`peaks`)."""
-        if self.combine == "dft321":
-            y = np.ascontiguousarray(units.transpose(0, 2, 1))  # (units, axes, samples)
-        elif self.combine == "magnitude":
-            y = np.sqrt(np.einsum("nsa,nsa->ns", units, units))
-        else:
-            y = units[:, :, self.combine].copy()
-        y -= (y @ self.trend.T) @ self.trend
-        y *= self.window
-        spectrum = np.fft.rfft(y, n=self.nfft, axis=-1)
-        power = spectrum.real ** 2
-        power += spectrum.imag ** 2
-        if power.ndim == 3:  # DFT321: the axes' powers add
-            power = power.sum(axis=1)
-        power *= self.scale
-        return power
+        count, samples = len(units), self.unit_samples
+        if self.combine == "magnitude":
+            units = np.sqrt(np.einsum("nsa,nsa->ns", units, units))[:, :, None]
+        elif self.combine != "dft321":
+            units = units[:, :, self.combine:self.combine + 1]
+        if len(self.padded) < count:  # zeros past the unit stay zeros: written once
+            self.padded = np.zeros((count, self.axes, self.nfft))
+            self.spectrum = np.empty((count,) + self.spectrum.shape[1:], dtype=complex)
+        padded = self.padded[:count]
+        windowed = padded[:, :, :samples]
+        # One row per unit and axis (a copy, in the order the FFT wants): each product is then
+        # one product over the whole batch.
+        rows = units.transpose(0, 2, 1).reshape(-1, samples)
+        coefficients = np.einsum("rs,ps->rp", rows, self.trend)  # (rows, polynomials)
+        np.multiply(rows.reshape(windowed.shape), self.window, out=windowed)
+        windowed -= np.einsum("rp,ps->rs", coefficients,
+                              self.windowed_trend).reshape(windowed.shape)
+        spectrum = np.fft.rfft(padded, axis=-1, out=self.spectrum[:count])
+        # DFT321: the axes' powers add; real and imaginary parts squared and summed over the
+        # axes in one pass, then the two parts of each bin added.
+        parts = spectrum.view(np.float64)
+        squares = np.einsum("nap,nap->np", parts, parts)
+        return squares[:, 0::2] + squares[:, 1::2]
 
     def gain(self, freqs_hz: np.ndarray) -> np.ndarray:
         """The high-pass's power response at any frequencies (Hz): a Butterworth through the
@@ -150,10 +182,15 @@ class _Plan:
         and forward and backward it acts twice."""
         if self.highpass_hz == 0:
             return np.ones_like(freqs_hz)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             ratio = np.tan(np.pi * self.highpass_hz / self.rate) / \
                 np.tan(np.pi * freqs_hz / self.rate)
-        return (1.0 / (1.0 + ratio ** (2 * _HIGHPASS_ORDER))) ** 2
+            # ratio ** (2 × 4th order) by squaring thrice: half the time of a general power,
+            # the same numbers to 1e-15.
+            power = ratio * ratio
+            power *= power
+            power *= power
+        return (1.0 / (1.0 + power)) ** 2
 
     def peaks(self, power: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -166,8 +203,9 @@ class _Plan:
         near the cutoff would move a 32 Hz tone's peak by 4 Hz. Band levels and mean squares
         are those of the weighted spectrum.
         """
+        weighted = power * self.response
         freqs, powers = top_peaks(power, self.in_band, self.half_width, self.top, self.bin_hz,
-                                   weight=self.response)
+                                  weighted=weighted)
         # Sub-bin interpolation may step a hair past a band edge; the peak is still in band.
         freqs = np.clip(freqs, self.fmin, self.fmax)
         powers = powers * self.gain(freqs)
@@ -176,9 +214,8 @@ class _Plan:
         order = np.argsort(-np.where(np.isnan(powers), -np.inf, powers), axis=1, kind="stable")
         freqs = np.take_along_axis(freqs, order, axis=1)
         powers = np.take_along_axis(powers, order, axis=1)
-        weighted = power * self.response
         return (freqs, powers, unit_band_levels_db(weighted, self.in_band, self.band_edges),
-                weighted @ self.mean_square)
+                np.einsum("ub,b->u", weighted, self.mean_square))
 
 
 def _orthonormal_polynomials(length: int, order: int) -> np.ndarray:
@@ -277,7 +314,8 @@ def analyze_stream(stream: RecordingStream, *, unit_ms: float = 100.0, top: int 
                    count: int = 15, selection: str = "stationary", fmin: float | None = None,
                    fmax: float | None = None, highpass_hz: float = 30.0, axis: str | None = None,
                    min_separation_hz: float | None = None, block_frames: int | None = None,
-                   dtype=np.float32, progress: ProgressCallback | None = None) -> Analysis:
+                   dtype=np.float32, keep_bands: bool = True,
+                   progress: ProgressCallback | None = None) -> Analysis:
     """Principal frequencies of every unit of a streamed recording, and the units to use.
 
     The recording is read a block at a time (see the module doc for the method); memory holds
@@ -300,6 +338,9 @@ def analyze_stream(stream: RecordingStream, *, unit_ms: float = 100.0, top: int 
         block_frames: frames read at a time (default: :data:`UNIT_BATCH` units).
         dtype: ``np.float32`` (default) or ``np.float64``, how the per-unit frequencies, powers
             and band levels are stored; everything is computed in float64.
+        keep_bands: keep every unit's band levels in the result (False: they judge the
+            stationary run as the units stream past, and the result's ``band_levels_db`` has no
+            columns; a day of units then needs 80 MB less).
         progress: called as ``progress(units_done, units_expected)``.
 
     Returns:
@@ -347,19 +388,18 @@ def analyze_stream(stream: RecordingStream, *, unit_ms: float = 100.0, top: int 
     unit_samples = unit_samples_for(unit_ms, rate, source)
     combine = _combination(stream.axes, axis, source)
     plan = _Plan(rate, unit_samples, unit_ms, top, fmin, fmax, highpass_hz, min_separation_hz,
-                 combine)
+                 combine, len(stream.axes))
     expected = stream.frames_hint // unit_samples
     if stream.frames is not None:
         check_unit_count(expected, unit_ms, source)  # before the results are allocated
     freqs_out = _Rows(expected, top, dtype, unit_ms, source)
     powers_out = _Rows(expected, top, dtype, unit_ms, source)
-    bands_out = _Rows(expected, FEATURE_BANDS, dtype, unit_ms, source)
+    bands_out = _Rows(expected, FEATURE_BANDS if keep_bands else 0, dtype, unit_ms, source)
     runs = _StationaryRuns(count, expected, unit_ms, source) if selection == "stationary" else None
-    peak = mean_square = 0.0
+    mean_square = 0.0
     batch = UNIT_BATCH * unit_samples
     block_frames = batch if block_frames is None else block_frames
     for units, whole in _whole_units(stream, block_frames, unit_samples, batch):
-        peak = max(peak, _peak(units))
         if not whole:  # the tail that fills no unit counts for the recording's peak only
             continue
         power = plan.power(units.reshape(-1, unit_samples, units.shape[1]))
@@ -367,14 +407,14 @@ def analyze_stream(stream: RecordingStream, *, unit_ms: float = 100.0, top: int 
         mean_square += float(np.sum(mean_squares))
         freqs_out.extend(freqs)
         powers_out.extend(powers)
-        bands_out.extend(bands)
+        bands_out.extend(bands if keep_bands else bands[:, :0])
         if runs is not None:
             runs.feed(bands)
         if progress is not None:
             progress(freqs_out.size, max(freqs_out.size, expected))
     total = freqs_out.size
     if total:
-        level = np.sqrt(mean_square / total)
+        level, peak = np.sqrt(mean_square / total), stream.peak  # the stream's whole pass
         if peak == 0 or level <= peak * 10 ** (SILENCE_DB / 20):
             raise fail(source, "signal is silent or constant (no vibration above "
                                f"{SILENCE_DB:g} dB of its peak after the high-pass)")
@@ -395,10 +435,6 @@ def analyze_stream(stream: RecordingStream, *, unit_ms: float = 100.0, top: int 
     starts = np.arange(total) * unit_samples / rate
     return Analysis(float(rate), float(unit_ms), top, starts, freqs_all, powers_out.result(),
                     bands_out.result(), selected, selection)
-
-
-def _peak(samples: np.ndarray) -> float:
-    return max(float(np.max(samples)), -float(np.min(samples)))
 
 
 def _whole_units(stream: RecordingStream, block_frames: int, unit_samples: int, batch: int
