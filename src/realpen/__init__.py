@@ -156,7 +156,9 @@ def tactile_pattern(recording, *, actuator="lra:f0=175,q=8", condition: str | No
     superposed, crossfaded sub-patterns (:func:`realpen.tactile.build.tactile_pattern`).
 
     Args:
-        recording: a :class:`Recording` (see :func:`load_recording`) or the path of one.
+        recording: a :class:`Recording` (see :func:`load_recording`), analysed whole, or the
+            path of one, streamed so that memory does not grow with its length (see
+            :func:`realpen.tactile.build.build_pattern`).
         actuator: an :class:`Actuator` or a spec string (``"lra:f0=175,q=8"``,
             ``"piezo:f0=300,q=2"``, ``"flat"`` or the path of a measured-response CSV).
         condition: study condition ``"A"``–``"F"``. None gives condition B (the method's

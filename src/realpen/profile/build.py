@@ -29,6 +29,7 @@ import numpy as np
 from realpen._version import __version__
 from realpen.checks import MAX_FORCE_N, MAX_GRID_POINTS, MAX_SPEED_MM_S
 from realpen.errors import ParameterError, fail
+from realpen.io.blocks import RecordingStream
 from realpen.io.limits import read_bounded
 from realpen.io.recording import Recording
 from realpen.profile.bundle import PenProfile, bundle_wavs
@@ -134,8 +135,8 @@ def profile_from_parts(name: str, tool: str, pattern: TactilePattern, sound: np.
 
 
 def build_profile(name: str, tool: str,
-                  vibration: Recording | Sequence[tuple[float, float, Recording]]
-                  | HattModelSet | VibrationGrid,
+                  vibration: Recording | RecordingStream | str | os.PathLike
+                  | Sequence[tuple[float, float, Recording]] | HattModelSet | VibrationGrid,
                   sound: Recording | SoundLoop, actuator: Actuator | str,
                   tactile_params: TactileParams | None = None, unit_ms: float = 300.0,
                   crossfade_ms: float = 10.0, coupling=None, description: str = "",
@@ -147,7 +148,10 @@ def build_profile(name: str, tool: str,
     Args:
         name: profile name (letters, digits, ``-_.``; up to 64 characters).
         tool: the tool type (pencil, ballpoint, …).
-        vibration: the pen's vibration recording (any axes and rate) — or, for a feel that
+        vibration: the pen's vibration recording (any axes and rate): a
+            :class:`~realpen.io.recording.Recording` (analysed in memory) or a path or
+            :class:`~realpen.io.blocks.RecordingStream` (streamed, in flat memory at any length;
+            see :func:`~realpen.tactile.build.build_pattern`) — or, for a feel that
             follows the pen, recordings at several points as ``(speed_mm_s, force_n,
             recording)`` tuples (:func:`~realpen.tactile.grid.grid_from_recordings`), a HaTT
             texture model (:class:`~realpen.datasets.hatt.HattModelSet`,
@@ -182,10 +186,12 @@ def build_profile(name: str, tool: str,
     coupling = Coupling() if coupling is None else coupling
     params = tactile_params or TactileParams()
     grid, notes = None, ()
-    if isinstance(vibration, Recording):
+    if isinstance(vibration, (Recording, RecordingStream, str, os.PathLike)):
         pattern = build_pattern(vibration, actuator, params, progress)
-        sources = [SourceFile(role="vibration", name=Path(vibration.source).name,
-                              sha256=vibration.sha256)]
+        source = vibration.source if isinstance(vibration, (Recording, RecordingStream)) \
+            else vibration
+        sources = [SourceFile(role="vibration", name=Path(source).name,
+                              sha256=pattern.provenance.get("sha256"))]
     else:
         if isinstance(vibration, VibrationGrid):
             grid = vibration if reference is None else _with_reference(vibration, reference)

@@ -4,6 +4,9 @@
    resampling, zero-phase high-pass.
 2. Analyse unit sequences of ``selection_unit_ms`` (100 ms) and select the stretch: K × units
    consecutive units, never the first or the last (:func:`realpen.dsp.spectrum.analyze`).
+   A recording given as a file is streamed instead: analysed a block at a time, then only the
+   stretch (and a margin) read and prepared, so memory stays flat however long it is
+   (:mod:`realpen.tactile.stretch`).
 3. Principal frequencies per sub-pattern: each selected unit's own (A–C), or — when a
    sub-pattern spans several units (D–F: the 15 units of B's stretch) — those of the
    concatenated units analysed as one unit.
@@ -36,18 +39,21 @@ normalised together; the stored levels are after that gain.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from realpen.checks import MAX_BANDS, MAX_LEVELS
-from realpen.dsp.filters import prepare
-from realpen.dsp.spectrum import ProgressCallback, analyze, principal_frequencies
+from realpen.dsp.spectrum import ProgressCallback, principal_frequencies
 from realpen.dsp.tracks import continuous_phases, joins, link_components
 from realpen.errors import ParameterError, RealPenError, fail
-from realpen.io.recording import Recording, as_recording
+from realpen.io.blocks import RecordingStream
+from realpen.io.recording import Recording
 from realpen.tactile.actuator import Actuator, as_actuator, weighting
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.pattern import Component, TactilePattern
 from realpen.tactile.residual import Residual, render_residual, residual_bands, residual_envelope
+from realpen.tactile.stretch import Stretch, locate
 from realpen.tactile.synthesis import synthesize
 
 __all__ = ["build_pattern", "tactile_pattern", "DEFAULT_ACTUATOR"]
@@ -55,49 +61,42 @@ __all__ = ["build_pattern", "tactile_pattern", "DEFAULT_ACTUATOR"]
 DEFAULT_ACTUATOR = "lra:f0=175,q=8"
 
 
-def _subpattern_peaks(mono: np.ndarray, rate: float, analysis, params: TactileParams,
-                      source: str) -> list[tuple[np.ndarray, np.ndarray]]:
+def _subpattern_peaks(stretch: Stretch, params: TactileParams
+                      ) -> list[tuple[np.ndarray, np.ndarray]]:
     """(frequencies Hz, powers) per sub-pattern, strongest first."""
-    per = params.units_per_subpattern
+    per, analysis, source = params.units_per_subpattern, stretch.analysis, stretch.source
     if per == 1:
-        peaks = [analysis.unit(int(unit)) for unit in analysis.selected]
+        peaks = [stretch.peaks(int(unit)) for unit in analysis.selected]
         for unit, (freqs, _) in zip(analysis.selected, peaks):
             if not len(freqs):
                 raise fail(source, f"no spectral peaks in selected unit {int(unit)} (at "
                                    f"{float(analysis.starts_s[unit]):.2f} s); it is silent "
                                    f"in the analysed band")
         return peaks
-    unit_samples = int(round(params.selection_unit_ms * rate / 1000.0))
     peaks = []
-    for index in range(params.subpatterns):
-        units = analysis.selected[index * per:(index + 1) * per]
-        segment = mono[int(units[0]) * unit_samples:(int(units[-1]) + 1) * unit_samples]
+    for segment in _subpattern_samples(stretch, params):
         # The concatenated units are one unit: exactly their samples.
         _, freqs, powers, _ = principal_frequencies(
-            segment, rate, len(segment) * 1000.0 / rate, params.top, params.highpass_hz,
-            params.fmax_hz, source=source)
+            segment, stretch.rate, len(segment) * 1000.0 / stretch.rate, params.top,
+            params.highpass_hz, params.fmax_hz, source=source)
         keep = np.isfinite(freqs[0])
         if not keep.any():
-            raise fail(source, f"no spectral peaks in the selected {len(segment) / rate:.2f} s")
+            raise fail(source, f"no spectral peaks in the selected "
+                               f"{len(segment) / stretch.rate:.2f} s")
         peaks.append((freqs[0][keep], powers[0][keep]))
     return peaks
 
 
-def _subpattern_samples(mono: np.ndarray, rate: float, analysis, params: TactileParams
-                        ) -> list[np.ndarray]:
+def _subpattern_samples(stretch: Stretch, params: TactileParams) -> list[np.ndarray]:
     """The samples each sub-pattern's peaks came from: its selected unit, or (D–F) the
     concatenation of its consecutive selected units."""
-    per = params.units_per_subpattern
-    unit_samples = int(round(params.selection_unit_ms * rate / 1000.0))
-    out = []
-    for index in range(params.subpatterns):
-        units = analysis.selected[index * per:(index + 1) * per]
-        out.append(mono[int(units[0]) * unit_samples:(int(units[-1]) + 1) * unit_samples])
-    return out
+    per, selected = params.units_per_subpattern, stretch.analysis.selected
+    return [stretch.samples(int(selected[index * per]), int(selected[(index + 1) * per - 1]))
+            for index in range(params.subpatterns)]
 
 
-def _residual(mono: np.ndarray, rate: float, analysis, params: TactileParams, units,
-              actuator: Actuator, band: tuple[float, float]) -> tuple[Residual, int]:
+def _residual(stretch: Stretch, params: TactileParams, units, actuator: Actuator,
+              band: tuple[float, float]) -> tuple[Residual, int]:
     """The residual before the normalisation gain (levels in full scale per √Hz on the sines'
     relative scale; see the module docstring), and how many bands the weighting cap limited."""
     # Only what the pattern's own rate can hold; the bands fit the levels' limit.
@@ -110,9 +109,8 @@ def _residual(mono: np.ndarray, rate: float, analysis, params: TactileParams, un
     centres = np.sqrt(np.asarray(edges[:-1]) * np.asarray(edges[1:]))
     weights = weighting(actuator, centres, band, params.cap_db)
     levels = []
-    for samples, (freqs, powers) in zip(_subpattern_samples(mono, rate, analysis, params),
-                                        units):
-        density = residual_envelope(samples, rate, freqs, edges)
+    for samples, (freqs, powers) in zip(_subpattern_samples(stretch, params), units):
+        density = residual_envelope(samples, stretch.rate, freqs, edges)
         share = powers / powers.sum()
         base = np.sqrt(share) if params.amplitude == "sqrt" else share
         scale_sq = float(np.sum(base ** 2) / 2) / float(powers.sum())
@@ -120,14 +118,17 @@ def _residual(mono: np.ndarray, rate: float, analysis, params: TactileParams, un
     return Residual(edges, levels, params.seed), int(np.sum(weights.clipped))
 
 
-def build_pattern(recording: Recording, actuator: Actuator | str = DEFAULT_ACTUATOR,
-                  params: TactileParams | None = None, progress: ProgressCallback | None = None,
-                  **options) -> TactilePattern:
+def build_pattern(recording: Recording | RecordingStream | str | os.PathLike,
+                  actuator: Actuator | str = DEFAULT_ACTUATOR, params: TactileParams | None = None,
+                  progress: ProgressCallback | None = None, **options) -> TactilePattern:
     """Run the tactile pipeline on a recording (see the module docstring).
 
     Args:
-        recording: a :class:`~realpen.io.recording.Recording` (any axes, any rate), a path to
-            one, or an array with ``input_rate=`` (Hz).
+        recording: a :class:`~realpen.io.recording.Recording` (any axes, any rate) or an array
+            with ``input_rate=`` (Hz), analysed in memory; or a path (WAV/FLAC/OGG, CSV, NPZ;
+            ``input_rate=`` for a CSV with no time column) or a
+            :class:`~realpen.io.blocks.RecordingStream`, streamed, in memory that does not grow
+            with the recording (:mod:`realpen.tactile.stretch`).
         actuator: an :class:`~realpen.tactile.actuator.Actuator` or a spec string
             (``"lra:f0=175,q=8"``).
         params: the parameters (default: condition B); ``options`` override its fields
@@ -156,19 +157,14 @@ def build_pattern(recording: Recording, actuator: Actuator | str = DEFAULT_ACTUA
     elif options:
         params = params.updated(**options)
     actuator = as_actuator(actuator)
-    recording = as_recording(recording, input_rate, rate_parameter="input_rate",
-                             data_parameter="recording")
-    prepared = prepare(recording, params.axis, params.analysis_rate, params.highpass_hz)
-    analysis = analyze(prepared.mono, prepared.rate, params.selection_unit_ms, params.top,
-                       params.subpatterns * params.units_per_subpattern, params.selection,
-                       fmin=params.highpass_hz, fmax=params.fmax_hz, source=recording.source,
-                       progress=progress)
-    units = _subpattern_peaks(prepared.mono, prepared.rate, analysis, params, recording.source)
+    stretch = locate(recording, params, input_rate=input_rate, progress=progress)
+    analysis = stretch.analysis
+    units = _subpattern_peaks(stretch, params)
     highest = max(float(np.max(freqs)) for freqs, _ in units)
     if highest >= params.rate / 2:
         raise ParameterError("rate", f"{params.rate} Hz is too low for components up to "
                                      f"{highest:.0f} Hz")
-    band = (params.highpass_hz, params.fmax_hz or prepared.rate / 2)
+    band = (params.highpass_hz, params.fmax_hz or stretch.rate / 2)
     rng = np.random.default_rng(params.seed)
     freqs_per_sub = [freqs for freqs, _ in units]
     if params.boundary == "crossfade":
@@ -194,25 +190,21 @@ def build_pattern(recording: Recording, actuator: Actuator | str = DEFAULT_ACTUA
                      params.unit_ms, params.boundary, params.crossfade_ms)
     residual, residual_clipped = None, 0
     if params.model == "sines+residual":
-        residual, residual_clipped = _residual(prepared.mono, prepared.rate, analysis, params,
-                                               units, actuator, band)
+        residual, residual_clipped = _residual(stretch, params, units, actuator, band)
         raw = raw + render_residual(residual, params.rate, params.unit_ms, params.crossfade_ms)
     peak = float(np.max(np.abs(raw)))
     if not np.isfinite(peak) or peak <= 0:
-        raise RealPenError(f"{recording.source}: the pattern came out silent or not finite; "
+        raise RealPenError(f"{stretch.source}: the pattern came out silent or not finite; "
                            f"check the actuator and weighting parameters")
     gain = 10 ** (-params.headroom_db / 20) / peak
     subpatterns = [[Component(float(f), float(a * gain), float(p), float(pw), float(w), bool(c),
                               bool(jp), bool(jn))
                     for f, pw, w, a, p, c, jp, jn in zip(*sub)] for sub in relative]
     first, last = int(analysis.selected[0]), int(analysis.selected[-1])
-    unit_samples = int(round(params.selection_unit_ms * prepared.rate / 1000.0))
-    provenance = {"path": recording.source, "sha256": recording.sha256,
-                  "rate_hz": recording.rate, "axes": list(recording.axes),
-                  "units": recording.units, "frames": int(recording.samples.shape[0]),
-                  "history": list(prepared.history), "gain": gain,
+    provenance = {**stretch.provenance, "gain": gain,
                   "stretch_s": (float(analysis.starts_s[first]),
-                                float(analysis.starts_s[last] + unit_samples / prepared.rate))}
+                                float(analysis.starts_s[last]
+                                      + stretch.unit_samples / stretch.rate))}
     clipped = sum(bool(c) for sub in relative for c in sub[5])
     notes = ((f"{clipped} component(s) limited by the {params.cap_db:g} dB weighting cap",)
              if clipped else ())
