@@ -3,7 +3,8 @@
 Every group of subcommands lives in a module of its own (``*_cmds.py``) with a
 ``register(app)`` function; :mod:`realpen.cli.root` builds the root :data:`app` and calls them,
 and no command module imports the root or this package's names back. :func:`main`, the console
-script, runs the app: problems with the user's input surface as
+script, runs the app — only the part its first word names, so that a command imports and builds
+no other command (:func:`realpen.cli.root.app_for`): problems with the user's input surface as
 :class:`realpen.errors.RealPenError` and are printed as one line on stderr with exit code 2; a
 :class:`realpen.errors.ParameterError` (worded with a Python parameter name) is shown with the
 command's flag instead (:mod:`realpen.cli.flags`).
@@ -27,11 +28,17 @@ try:  # recent typer releases carry their own copy of click
 except ImportError:  # older typer uses click itself
     from click import exceptions as click_errors
 
+from realpen.cli import root
 from realpen.cli.common import CONTEXT_SETTINGS
-from realpen.cli.root import app
 from realpen.errors import ParameterError, RealPenError
 
 __all__ = ["app", "main", "command_path", "CONTEXT_SETTINGS"]
+
+
+def __getattr__(name: str):
+    if name == "app":  # the whole command tree: built on first use (a run builds only its part)
+        return root.app
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def command_path(args: Sequence[str]) -> str:
@@ -42,7 +49,7 @@ def command_path(args: Sequence[str]) -> str:
     subcommand (where a group runs a default subcommand then, that one is the path's last
     word). Empty for the top level.
     """
-    command = typer.main.get_command(app)
+    command = typer.main.get_command(root.app)
     path: list[str] = []
     tokens = iter(args)
     for token in tokens:
@@ -80,11 +87,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     Args:
         argv: the arguments after ``realpen`` (default: ``sys.argv[1:]``).
 
-    Exits with 0 on success, 2 on bad input or usage, 130 when interrupted.
+    Exits with 0 on success, 2 on bad input or usage, 1 when out of memory, 130 when
+    interrupted.
     """
     args = list(sys.argv[1:] if argv is None else argv)
     try:
-        code = app(args=args, prog_name="realpen", standalone_mode=False)
+        code = root.app_for(args)(args=args, prog_name="realpen", standalone_mode=False)
     except ParameterError as error:
         from realpen.cli.flags import describe
 
@@ -100,6 +108,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         _fail(error.format_message(), error.exit_code)
     except (KeyboardInterrupt, typer.Abort):
         _fail("interrupted", 130)
+    except MemoryError:  # nothing was written: outputs are renamed into place only when done
+        _fail("out of memory: this work needs more memory than the system allows this process "
+              "(a recording loaded whole, e.g. with --analysis-rate, may be too long)", 1)
     except OSError as error:  # a path the system refuses (too long, a link loop, no access)
         where = f"{error.filename}: " if error.filename else ""
         _fail(f"{where}{error.strerror or error}", 2)

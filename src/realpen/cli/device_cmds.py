@@ -4,8 +4,6 @@ Only typer and the standard library are imported here; the protocol client, pyse
 numpy and the simulated pen (:mod:`realpen.device`) are imported inside the commands.
 """
 
-from __future__ import annotations
-
 import contextlib
 import errno
 import os

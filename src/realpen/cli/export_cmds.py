@@ -6,8 +6,6 @@ Only typer and the standard library are imported here; the exports (numpy, scipy
 imported inside the command, so ``realpen --help`` stays fast.
 """
 
-from __future__ import annotations
-
 from pathlib import Path
 
 import typer
@@ -18,6 +16,7 @@ from realpen.cli.common import (
     command_group,
     console,
     force_option,
+    print_line,
     whole_number,
 )
 
@@ -102,11 +101,11 @@ def export(
     check_outputs(*outputs, force=force, inputs={"profile": loaded.path})
     written = export_profile(loaded, fmt, output, stereo=stereo or None, rate=rate,
                              repeats=repeats, subtype=subtype)
-    console.print(f"wrote {written.path}: {written.export.summary}")
+    print_line(f"wrote {written.path}: {written.export.summary}")
     for companion in written.companions:
-        console.print(f"wrote {companion}")
+        print_line(f"wrote {companion}")
     for limit in written.export.limits:
-        console.print(f"note: {fmt} cannot carry: {limit}")
+        print_line(f"note: {fmt} cannot carry: {limit}")
 
 
 @export_app.command("read")

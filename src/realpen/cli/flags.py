@@ -90,9 +90,10 @@ COMMAND_FLAGS: dict[str, dict[str, str]] = {
     # The report's power simulation is --power-sims.
     "stats report": {"sims": "--power-sims"},
     # The recording's rate (a CSV without time) is --input-rate; --rate is the pattern's.
-    "tactile build": {"load_recording.rate": "--input-rate"},
+    "tactile build": {"load_recording.rate": "--input-rate", "open_stream.rate": "--input-rate"},
     "profile build": {
         "load_recording.rate": "--input-rate",
+        "open_stream.rate": "--input-rate",
         # build_profile's own unit_ms and crossfade_ms are the sound loop's; the tactile
         # pattern's unit (checked in build_pattern, or before build_profile runs) is --unit-ms.
         "build_pattern.unit_ms": "--unit-ms",

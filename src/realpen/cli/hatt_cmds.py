@@ -4,8 +4,6 @@ Only typer and the standard library are imported here; the reader and the synthe
 (:mod:`realpen.datasets.hatt`, numpy, scipy) are imported inside the commands.
 """
 
-from __future__ import annotations
-
 from pathlib import Path
 
 import typer

@@ -4,8 +4,6 @@ Only typer and the standard library are imported here; the library (numpy, scipy
 matplotlib) is imported inside the commands, so ``realpen --help`` stays fast.
 """
 
-from __future__ import annotations
-
 import sys
 from pathlib import Path
 
@@ -17,6 +15,7 @@ from realpen.cli.common import (
     command_group,
     console,
     force_option,
+    print_line,
     progress_bar,
 )
 from realpen.cli.sound_cmds import CROSSFADE_MS, UNIT_MS
@@ -79,7 +78,7 @@ def build(
     (--vibration-grid) or a HaTT texture model (--hatt). Says where the bundle went. With
     --install it goes into your profiles folder, named after the profile.
     """
-    from realpen.datasets.hatt import load_hatt
+    from realpen.io.blocks import open_stream
     from realpen.io.paths import user_profiles_dir
     from realpen.io.recording import load_recording
     from realpen.motion.coupling import Coupling
@@ -114,10 +113,12 @@ def build(
                  for speed, force_n, path in rows]
         long = True
     elif hatt is not None:
+        from realpen.datasets.hatt import load_hatt  # scipy.signal: only for a HaTT model
+
         shake, long = load_hatt(hatt), True
     else:
-        shake = load_recording(vibration, rate=input_rate)
-        long = shake.duration > PROGRESS_AFTER_S
+        shake = open_stream(vibration, rate=input_rate)  # streamed: flat memory at any length
+        long = shake.duration_hint > PROGRESS_AFTER_S
     noise = load_sound(sound)
     with progress_bar("building", long) as progress:
         profile = build_profile(name, tool, shake, noise, response, params, sound_unit_ms,
@@ -148,9 +149,9 @@ def list_command(
             print(f"realpen: warning: skipped profile {' '.join(str(error).split())}",
                   file=sys.stderr, flush=True)
             continue
-        console.print(f"{profile.summary()} ({where}, version {profile.version})")
+        print_line(f"{profile.summary()} ({where}, version {profile.version})")
     if not found:
-        console.print("no profiles found")
+        print_line("no profiles found")
 
 
 @profile_app.command("show")

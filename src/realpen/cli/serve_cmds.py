@@ -1,7 +1,5 @@
 """``realpen serve`` (the live app) and ``realpen strokes export``."""
 
-from __future__ import annotations
-
 import ipaddress
 import signal
 from pathlib import Path

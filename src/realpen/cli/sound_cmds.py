@@ -4,8 +4,6 @@ Only typer and the standard library are imported here; the library (numpy, scipy
 is imported inside the commands, so ``realpen --help`` stays fast.
 """
 
-from __future__ import annotations
-
 from pathlib import Path
 
 import typer
@@ -82,7 +80,6 @@ def loop(
     """
     from realpen.checks import require_choice
     from realpen.io.files import write_files
-    from realpen.sound.granular import granular_loop
     from realpen.sound.loop import find_loop, load_sound
 
     require_choice("mode", mode, MODES)  # the command picks the function by mode
@@ -96,6 +93,8 @@ def loop(
         where = (f"unit at {result.start_s:.3f} s" if result.searched
                  else "the file's own smpl loop")
     else:
+        from realpen.sound.granular import granular_loop  # scipy.ndimage: only for this mode
+
         result = granular_loop(sound, length_ms=length_ms, grain_ms=grain_ms, seed=seed,
                                level_dbfs=level_dbfs, source=recording)
         steady = sum(b - a for a, b in result.part.stretches) / result.rate

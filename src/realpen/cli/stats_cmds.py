@@ -6,8 +6,6 @@ and the standard library are imported here; the analyses (pandas, statsmodels, p
 imported inside the commands.
 """
 
-from __future__ import annotations
-
 import sys
 from pathlib import Path
 

@@ -7,8 +7,6 @@ of the group is registered on :data:`study_app`; what they print is built in
 :mod:`realpen.study.plan` and :mod:`realpen.study.design`.
 """
 
-from __future__ import annotations
-
 import sys
 from pathlib import Path
 

@@ -5,8 +5,6 @@ typer and the standard library are imported here; the library (numpy, scipy, sou
 imported inside the commands, so ``realpen --help`` stays fast.
 """
 
-from __future__ import annotations
-
 from pathlib import Path
 
 import typer
@@ -177,8 +175,8 @@ def tactile(
     """
     import numpy as np
 
+    from realpen.io.blocks import open_stream
     from realpen.io.files import json_text, wav_bytes, write_files
-    from realpen.io.recording import load_recording
     from realpen.tactile.actuator import parse_actuator
     from realpen.tactile.build import build_pattern
     from realpen.tactile.conditions import TactileParams
@@ -192,9 +190,10 @@ def tactile(
                                    amplitude=amplitude, seed=seed, cap_db=cap_db,
                                    selection=select, highpass_hz=highpass_hz, axis=axis,
                                    analysis_rate=analysis_rate, **model_options(model, condition))
-    loaded = load_recording(recording, rate=input_rate)
-    with progress_bar("analysing", loaded.duration > PROGRESS_AFTER_S) as progress:
-        pattern = build_pattern(loaded, response, params, progress)
+    # Streamed: only the stretch the pattern is made of is ever held in memory.
+    stream = open_stream(recording, rate=input_rate)
+    with progress_bar("analysing", stream.duration_hint > PROGRESS_AFTER_S) as progress:
+        pattern = build_pattern(stream, response, params, progress)
     outputs = {output: wav_bytes(pattern.samples, pattern.rate)}
     if json_out is not None:
         outputs[json_out] = json_text(pattern.report(), json_out).encode("utf-8")

@@ -9,8 +9,6 @@ from __future__ import annotations
 from fractions import Fraction
 
 import numpy as np
-from scipy import fft as sp_fft
-from scipy import signal
 
 from realpen.checks import MAX_RATE_HZ, MIN_RATE_HZ, require_choice, require_number
 from realpen.errors import ParameterError, fail
@@ -32,6 +30,8 @@ def dft321(samples: np.ndarray) -> np.ndarray:
     Returns:
         shape (frames,), same unit as the input.
     """
+    from scipy import fft as sp_fft  # scipy is slow to import; loaded where it is used
+
     axes = np.ascontiguousarray(np.asarray(samples, dtype=np.float64).T)
     frames = axes.shape[1]
     spectra = sp_fft.rfft(axes, axis=1)
@@ -102,6 +102,8 @@ def resample(recording: Recording, rate: float, *, parameter: str = "rate") -> R
         raise ParameterError(parameter, f"{rate:g} Hz would make {made:,} samples of "
                                         f"{recording.source}; at most {MAX_FRAMES:,} are "
                                         f"allowed (a lower rate or a shorter recording)")
+    from scipy import signal  # scipy.signal alone costs more than a second to import
+
     out = signal.resample_poly(recording.samples, ratio.numerator, ratio.denominator, axis=0)
     actual = recording.rate * ratio.numerator / ratio.denominator
     return recording.with_samples(out, f"resample:{actual:g}Hz", rate=actual)
@@ -129,6 +131,8 @@ def highpass(recording: Recording, cutoff_hz: float = 30.0, order: int = 4) -> R
                                           f"{2 * cutoff_hz:g} Hz; {recording.source} is at "
                                           f"{recording.rate:g} Hz here (after any resampling), "
                                           f"so its rate is too low (Nyquist {nyquist:g} Hz)")
+    from scipy import signal
+
     sos = signal.butter(order, cutoff_hz, btype="highpass", fs=recording.rate, output="sos")
     padlen = min(3 * (2 * len(sos) + 1), recording.samples.shape[0] - 1)
     filtered = signal.sosfiltfilt(sos, recording.samples, axis=0, padlen=max(padlen, 0))

@@ -116,7 +116,9 @@ FiniteNumber = Annotated[Any, PlainValidator(_finite_number), WithJsonSchema({"t
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    # defer_build: a model's validator is built when it is first used, not on import. Reading a
+    # profile builds ProfileMeta's alone (its sections are part of it), not one per section.
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, defer_build=True)
 
 
 def model_of(cls: type, name: str, overrides: dict[str, Any] | None = None) -> type[BaseModel]:

@@ -43,7 +43,6 @@ from typing import TYPE_CHECKING, Any
 from realpen.errors import RealPenError, fail
 from realpen.io.files import atomic_path, json_text
 from realpen.io.strokes import SAMPLE_FIELDS
-from realpen.study import tables as t
 
 if TYPE_CHECKING:
     from realpen.study.db import Database
@@ -234,6 +233,8 @@ def _question_ids(plan_text: str | None) -> list[str]:
 def _studies(connection, store: Database, design: str | None) -> list[Any]:
     from sqlalchemy import select
 
+    from realpen.study import tables as t  # sqlalchemy's tables: loaded with the queries
+
     rows = connection.execute(select(t.studies.c.id, t.studies.c.name, t.studies.c.version,
                                      t.studies.c.design).order_by(t.studies.c.id)).all()
     if design is not None:
@@ -250,6 +251,8 @@ def _answer_rows(connection, study_ids: list[int]) -> list[dict[str, Any]]:
     """Every answer of the answered trials of these studies, with its trial, session,
     participant and study, in the export's order."""
     from sqlalchemy import select
+
+    from realpen.study import tables as t
 
     if not study_ids:
         return []
@@ -313,6 +316,8 @@ def _csv_row(row: Mapping[str, Any]) -> list[Any]:
 def _sample_rows(connection, study_ids: list[int]) -> Iterable[Any]:
     from sqlalchemy import func, select
 
+    from realpen.study import tables as t
+
     if not study_ids:
         return []
     k, m, s = t.strokes, t.samples, t.sessions
@@ -333,6 +338,8 @@ def _distinct(connection, study_ids: list[int], column) -> list[str]:
     """The values of a trials (or answers) column in these studies' sessions, sorted."""
     from sqlalchemy import select
 
+    from realpen.study import tables as t
+
     if not study_ids:
         return []
     s = t.sessions
@@ -350,6 +357,8 @@ def _described(values: Iterable[str], known: Mapping[str, list[str]], default) -
 def _trials_sidecar(connection, store: Database, studies: list[Any], exported_at: str,
                     rows: int) -> dict[str, Any]:
     """The trials CSV's sidecar: every column, and the designs' levels of the categorical ones."""
+    from realpen.study import tables as t
+
     ids = [row.id for row in studies]
     pens: dict[str, list[str]] = {}
     conditions: dict[str, list[str]] = {}
