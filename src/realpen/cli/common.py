@@ -30,7 +30,7 @@ __all__ = ["CONTEXT_SETTINGS", "command_group", "LazyConsole", "console", "err_c
 
 
 class LazyConsole:
-    """A :class:`rich.console.Console` made on its first use (every attribute is the console's).
+    """A rich ``Console`` made on its first use (every attribute is the console's).
 
     Importing rich and making a console costs about 0.03 s of CPU at each start: a command
     whose output is plain lines (:func:`print_line`) never makes one.
