@@ -415,6 +415,7 @@ def test_realpen_analyze_streams_and_falls_back_for_a_new_rate(quantised, tmp_pa
     assert json.loads(out.read_text())["rate"] == 1000 and "→ magnitude" in result.stdout
 
 
+@pytest.mark.slow
 def test_the_streamed_path_imports_no_scipy_module_it_does_not_use():
     """scipy.ndimage, scipy.interpolate and scipy.signal took half the streamed analysis's
     resident memory (51 MB) for work its short spectra never do: none of them is loaded."""

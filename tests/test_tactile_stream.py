@@ -108,6 +108,34 @@ def test_a_recording_just_long_enough_streams_without_margins(tmp_path):
     assert hz < 0.1 and db < 0.5, (hz, db)
 
 
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_csv_and_npz_files_stream_as_wav_does(steady_file, tmp_path, suffix):
+    recording = load_recording(steady_file)
+    other = tmp_path / f"pen{suffix}"
+    if suffix == ".csv":
+        np.savetxt(other, recording.samples, delimiter=",", header="x,y,z", comments="",
+                   fmt="%.9g")
+    else:
+        np.savez(other, samples=recording.samples, rate=RATE)
+    wav = build_pattern(steady_file, condition="B")
+    streamed = build_pattern(other, condition="B", input_rate=RATE)  # a CSV without time
+    assert streamed.stretch_s == pytest.approx(wav.stretch_s)
+    assert streamed.provenance["frames"] == wav.provenance["frames"]
+    assert streamed.provenance["sha256"] == sha256_of(other)
+    hz, db = strongest_differences(streamed, wav)
+    assert hz < 0.01 and db < 0.01, (hz, db)  # the same samples, to 9 digits in the CSV
+
+
+def test_an_array_stream_can_be_resampled(steady_file):
+    from realpen.io.blocks import ArrayStream
+
+    recording = load_recording(steady_file)
+    stream = ArrayStream(recording.samples, RATE, units="m/s^2")
+    pattern = build_pattern(stream, condition="E", analysis_rate=2000)
+    assert pattern.analysis.rate == pytest.approx(2000)
+    assert pattern.provenance["units"] == "m/s^2"
+
+
 def test_resampling_is_done_in_memory(steady_file):
     pattern = build_pattern(steady_file, condition="E", analysis_rate=2000)
     assert any(step.startswith("resample") for step in pattern.provenance["history"])
@@ -153,6 +181,9 @@ def build_under_limit(tmp_path: Path, vibration: Path, sound: Path, limit: int |
                           preexec_fn=limit_address_space)
 
 
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"),
+                    reason="address-space limits and /proc/self/status as Linux has them")
 def test_a_profile_from_a_long_recording_fits_where_the_whole_signal_does_not(tmp_path):
     """40 minutes of 3-axis 1344 Hz data: in memory the samples, the DFT321's spectra and the
     filtered copy take over 300 MB more than a short recording's build; streamed, a few MB."""

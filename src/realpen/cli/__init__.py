@@ -109,8 +109,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     except (KeyboardInterrupt, typer.Abort):
         _fail("interrupted", 130)
     except MemoryError:  # nothing was written: outputs are renamed into place only when done
-        _fail("out of memory: this work needs more memory than the system allows this process "
-              "(a recording loaded whole, e.g. with --analysis-rate, may be too long)", 1)
+        _fail("out of memory: this work needs more memory than the system allows this process",
+              1)
     except OSError as error:  # a path the system refuses (too long, a link loop, no access)
         where = f"{error.filename}: " if error.filename else ""
         _fail(f"{where}{error.strerror or error}", 2)

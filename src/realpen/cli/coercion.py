@@ -185,5 +185,8 @@ class FastCoercionGroup(TyperGroup):
     """The root group: before it runs, its commands' plain options get the fast reader."""
 
     def main(self, *args, **kwargs):
-        install_fast_coercion(self)
+        try:
+            install_fast_coercion(self)
+        except (AttributeError, TypeError):  # a typer release built otherwise: typer reads all
+            pass
         return super().main(*args, **kwargs)

@@ -53,6 +53,8 @@ class LazyConsole:
         return self._console
 
     def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):  # our own state, never the console's (copies, pickling)
+            raise AttributeError(name)
         return getattr(self.rich, name)
 
 

@@ -230,8 +230,9 @@ def tactile_pattern(recording, actuator: Actuator | str = DEFAULT_ACTUATOR, *,
     """The tactile pattern of a recording for an actuator, as the method makes it.
 
     Args:
-        recording: a :class:`~realpen.io.recording.Recording`, a path, or an array with
-            ``input_rate=`` (Hz).
+        recording: a :class:`~realpen.io.recording.Recording` or an array with
+            ``input_rate=`` (Hz), analysed whole; or a path or a
+            :class:`~realpen.io.blocks.RecordingStream`, streamed (see :func:`build_pattern`).
         actuator: an :class:`~realpen.tactile.actuator.Actuator` or a spec string.
         condition: a study condition A–F (None: B's counts, or the counts given).
         progress: called as ``progress(units_done, units_total)``.

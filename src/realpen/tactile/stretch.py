@@ -31,12 +31,11 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from realpen.dsp.spectrum import Analysis, ProgressCallback, analyze, principal_frequencies
-from realpen.errors import fail
 from realpen.io.blocks import ArrayStream, RecordingStream, open_stream
 from realpen.io.recording import Recording, as_recording, load_recording
 from realpen.tactile.conditions import TactileParams
@@ -44,9 +43,10 @@ from realpen.tactile.conditions import TactileParams
 __all__ = ["Stretch", "locate", "MARGIN_S"]
 
 MARGIN_S = 1.0
-"""Seconds read on each side of a streamed stretch. The 30 Hz high-pass run forward and
-backward settles within a few of its periods (tens of ms); the rest keeps the DFT321 of the
-excerpt, which is circular, from wrapping one end of it onto the units used."""
+"""Seconds read on each side of a streamed stretch: they keep the edges of the zero-phase
+high-pass (which settles within tens of ms) and the seam of the excerpt's DFT321 (which is
+circular) away from the units used. The DFT321 of an excerpt still differs from that of the
+whole recording throughout (see the module doc)."""
 
 
 @dataclass(frozen=True)
@@ -63,8 +63,11 @@ class Stretch:
         source: the recording's name in messages.
         provenance: ``path``, ``sha256``, ``rate_hz``, ``axes``, ``units``, ``frames`` (of the
             whole recording) and ``history`` (the steps that made ``mono``).
-        unit_peaks: for a streamed stretch, (frequencies in Hz, powers) of each selected unit
-            found in ``mono`` (float64); empty in memory, where the analysis holds them.
+        unit_peaks: for a streamed stretch of one unit per sub-pattern, (frequencies in Hz,
+            powers) of each selected unit found in ``mono`` (float64); empty in memory, where the
+            analysis holds them. These are the peaks the pattern is made of; a streamed
+            ``analysis`` keeps its own estimate for every unit (the axes' powers summed, float32),
+            which for the selected units differs slightly from them.
     """
 
     analysis: Analysis
@@ -114,8 +117,12 @@ def locate(recording, params: TactileParams, *, input_rate: float | None = None,
         recording = open_stream(recording, rate=input_rate)
     if isinstance(recording, RecordingStream) and params.analysis_rate is None:
         return _streamed(recording, params, count, progress)
-    if isinstance(recording, RecordingStream):
-        recording = load_recording(recording.source, rate=recording.rate)
+    if isinstance(recording, ArrayStream):
+        recording = Recording(recording.samples, recording.rate, recording.axes, recording.units,
+                              recording.source)
+    elif isinstance(recording, RecordingStream):
+        recording = replace(load_recording(recording.source, rate=recording.rate),
+                            units=recording.units)
     elif isinstance(recording, (str, os.PathLike)):
         recording = load_recording(recording, rate=input_rate)
     recording = as_recording(recording, input_rate, rate_parameter="input_rate",
@@ -146,26 +153,24 @@ def _streamed(stream: RecordingStream, params: TactileParams, count: int,
                               fmax=params.fmax_hz, highpass_hz=params.highpass_hz,
                               axis=params.axis, keep_bands=False, progress=progress)
     rate, size = stream.rate, int(round(params.selection_unit_ms * stream.rate / 1000.0))
-    total = len(analysis.starts_s)
     first, last = int(analysis.selected[0]), int(analysis.selected[-1])
     margin = math.ceil(MARGIN_S * 1000.0 / params.selection_unit_ms)
     lead = min(margin, first)
-    start, stop = (first - lead) * size, min((last + 1 + margin) * size, total * size)
+    start, stop = (first - lead) * size, min((last + 1 + margin) * size, int(stream.frames))
     excerpt = Recording(stream.read(start, stop), rate, stream.axes, stream.units,
                         str(stream.source))
     prepared = prepare(excerpt, params.axis, None, params.highpass_hz)
-    # The selected units' peaks by the in-memory arithmetic, on the prepared excerpt's units.
-    units = (stop - start) // size
-    _, freqs, powers, _ = principal_frequencies(
-        prepared.mono[:units * size], rate, params.selection_unit_ms, params.top,
-        params.highpass_hz, params.fmax_hz, source=excerpt.source)
     unit_peaks = {}
-    for unit in range(first, last + 1):
-        keep = np.isfinite(freqs[unit - first + lead])
-        unit_peaks[unit] = (freqs[unit - first + lead][keep], powers[unit - first + lead][keep])
-    if not any(len(found) for found, _ in unit_peaks.values()):
-        raise fail(stream.source, f"no spectral peaks between {params.highpass_hz:g} Hz and "
-                                  f"{params.fmax_hz or rate / 2:g} Hz in the selected units")
+    if params.units_per_subpattern == 1:  # (D–F find their peaks in the joined units instead)
+        # The selected units' peaks by the in-memory arithmetic, on the prepared excerpt's units.
+        units = (stop - start) // size
+        _, freqs, powers, _ = principal_frequencies(
+            prepared.mono[:units * size], rate, params.selection_unit_ms, params.top,
+            params.highpass_hz, params.fmax_hz, source=excerpt.source)
+        for unit in range(first, last + 1):
+            row = unit - first + lead
+            keep = np.isfinite(freqs[row])
+            unit_peaks[unit] = (freqs[row][keep], powers[row][keep])
     path = str(stream.source)
     history = (f"stretch:{start / rate:.6f}-{stop / rate:.6f}s", *prepared.history)
     provenance = _provenance(excerpt, int(stream.frames), history)
