@@ -9,6 +9,9 @@ The JSON reader here (:func:`load_json`) is the one every RealPen JSON input goe
 (profile.json, coupling files): it bounds the document's size, nesting depth and the number of
 digits of any number, and refuses ``NaN``/``Infinity``.
 
+The integer ranges (:data:`MAX_STORED_INT`, :data:`MAX_JSON_INT`) are the one rule for numbers
+that every interface shares: the WebSocket schema, the HTTP API and both stores.
+
 The limits of *arguments* (rates, lengths, counts) and the helpers that check them are
 :mod:`realpen.checks`; :func:`check_signal` refuses a header's rate by the same
 :data:`~realpen.checks.MIN_RATE_HZ` and :data:`~realpen.checks.MAX_RATE_HZ`.
@@ -25,13 +28,24 @@ from pathlib import Path
 from realpen.checks import MAX_RATE_HZ, MIN_RATE_HZ, count_text, rate_text
 from realpen.errors import fail
 
-__all__ = ["MAX_CHANNELS", "MAX_FRAMES", "MAX_STREAM_SAMPLES",
+__all__ = ["MAX_STORED_INT", "MAX_JSON_INT", "MAX_CHANNELS", "MAX_FRAMES", "MAX_STREAM_SAMPLES",
            "MAX_JSON_BYTES",
            "MAX_JSON_DEPTH", "MAX_NUMBER_CHARS", "MAX_CSV_FIELD_CHARS", "MAX_CSV_LINE_CHARS",
            "MAX_CSV_BYTES", "MAX_NPZ_DIRECTORY_BYTES", "MAX_NPZ_ARRAY_BYTES",
            "MAX_SAMPLE_MAGNITUDE", "MAX_XML_BYTES", "MAX_MODEL_ORDER",
            "load_json", "json_depth", "count_values", "read_bounded", "check_size", "check_signal"]
 
+MAX_STORED_INT = 2**31 - 1
+"""The largest integer a store holds: 2,147,483,647, PostgreSQL's INTEGER (32-bit signed), the
+type of every id, number and count of the store (:mod:`realpen.study.tables`). SQLite holds 64
+bits, but the rule is one for both, so that what one store accepts the other accepts too. The
+WebSocket schema (stroke and sample numbers, study session and trial), the HTTP API's ids and
+bodies, and the stores themselves refuse a larger value as bad data, never as a store failure
+to retry."""
+MAX_JSON_INT = 2**53
+"""The largest integer taken where a number is echoed or counted but never stored (a WebSocket
+message's ``seq``, a position in the device's command log): 2**53, the end of the range in
+which a JSON number is exact in every reader (a double, so JavaScript's too)."""
 MAX_CHANNELS = 32
 """The most channels a recording may have (a pen's accelerometer has 3, a microphone 1–2)."""
 MAX_FRAMES = 2**26

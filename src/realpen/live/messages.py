@@ -27,6 +27,13 @@ number), so nothing is lost and nothing is stored twice.
 Types are strict: a number is a JSON number (an integer where one is counted: ``seq``,
 ``stroke``), a flag is ``true`` or ``false``, text is a string; nothing is coerced.
 
+Integer ranges are the store's own (:mod:`realpen.io.limits`), so that whatever the schema takes
+a store can hold: ``stroke``, ``index`` and the number of a batch's last sample
+(``index + len(samples) - 1``) are 0 to :data:`~realpen.io.limits.MAX_STORED_INT`
+(2,147,483,647), ``study_session`` and ``trial`` 1 to that; ``seq``, echoed in the reply but never
+stored, is 0 to :data:`~realpen.io.limits.MAX_JSON_INT` (2**53). A number out of its range is
+refused like any other schema violation (``invalid_message``: not stored, not to be sent again).
+
 Units: ``t`` in seconds on the page's clock (``performance.now() / 1000``); ``x``, ``y`` in mm
 from the writing surface's top-left corner (CSS pixels over the calibration); ``pressure``
 normalised 0–1 (a mouse reports the constant 0.5); ``tilt_x``, ``tilt_y`` in degrees
@@ -34,9 +41,9 @@ normalised 0–1 (a mouse reports the constant 0.5); ``tilt_x``, ``tilt_y`` in d
 one stroke-sample definition, :class:`realpen.io.strokes.StrokeSample` (:class:`Sample` is that
 class), which the stroke store and stroke rendering use as well.
 
-This module imports pydantic, :mod:`realpen.io.strokes`, the profile schema's name rule,
-:mod:`realpen.errors` and :mod:`realpen.validation` only: loading the WebSocket schema loads
-neither scipy nor soundfile.
+This module imports pydantic, :mod:`realpen.io.strokes`, :mod:`realpen.io.limits`, the profile
+schema's name rule, :mod:`realpen.errors` and :mod:`realpen.validation` only: loading the
+WebSocket schema loads neither scipy nor soundfile.
 """
 
 from __future__ import annotations
@@ -44,9 +51,10 @@ from __future__ import annotations
 import json
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
 
 from realpen.errors import RealPenError
+from realpen.io.limits import MAX_JSON_INT, MAX_STORED_INT
 from realpen.io.strokes import StrokeSample, Time
 from realpen.profile.schema import NAME_PATTERN  # pydantic-only: the name rule's one home
 from realpen.validation import validation_line
@@ -69,8 +77,9 @@ ErrorCode = Literal["binary", "too_large", "invalid_json", "invalid_message", "p
 
 PAGE_PATTERN = r"^[A-Za-z0-9_-]{8,64}$"
 
-Seq = Annotated[int, Field(ge=0, le=2**53)]
-StrokeNo = Annotated[int, Field(ge=0, le=2**53)]
+Seq = Annotated[int, Field(ge=0, le=MAX_JSON_INT)]  # echoed in the reply, never stored
+StrokeNo = Annotated[int, Field(ge=0, le=MAX_STORED_INT)]
+StudyId = Annotated[int, Field(ge=1, le=MAX_STORED_INT)]
 
 
 class _Message(BaseModel):
@@ -107,9 +116,8 @@ class PenDown(_Message):
     pointer_type: PointerType = "pen"
     px_per_mm: float = Field(gt=0, le=1000)
     calibrated: bool = False
-    # ids are 32-bit in the store (PostgreSQL INTEGER)
-    study_session: Annotated[int, Field(ge=1, le=2**31 - 1)] | None = None
-    trial: Annotated[int, Field(ge=1, le=2**31 - 1)] | None = None
+    study_session: StudyId | None = None
+    trial: StudyId | None = None
 
 
 class Samples(_Message):
@@ -119,7 +127,17 @@ class Samples(_Message):
     seq: Seq
     stroke: StrokeNo
     samples: list[Sample] = Field(min_length=1, max_length=MAX_SAMPLES)
-    index: int | None = Field(None, ge=0, le=2**53)
+    index: int | None = Field(None, ge=0, le=MAX_STORED_INT)
+
+    @model_validator(mode="after")
+    def _last_number_is_stored(self) -> Samples:
+        # Each sample is stored under its own number: the batch's last must fit the store too.
+        if self.index is not None and self.index + len(self.samples) - 1 > MAX_STORED_INT:
+            raise ValueError(f"the batch's last sample would be number "
+                             f"{self.index + len(self.samples) - 1} (index {self.index} + "
+                             f"{len(self.samples)} samples - 1); sample numbers go up to "
+                             f"{MAX_STORED_INT}")
+        return self
 
 
 class Gain(_Message):
@@ -191,7 +209,7 @@ def _salvage_seq(raw: str) -> int | None:
     except ValueError:
         return None
     seq = document.get("seq") if isinstance(document, dict) else None
-    return seq if isinstance(seq, int) and not isinstance(seq, bool) and 0 <= seq <= 2**53 \
+    return seq if isinstance(seq, int) and not isinstance(seq, bool) and 0 <= seq <= MAX_JSON_INT \
         else None
 
 

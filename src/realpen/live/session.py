@@ -24,6 +24,7 @@ import time
 import uuid
 from dataclasses import dataclass
 
+from realpen.errors import ParameterError
 from realpen.live.catalog import Catalog
 from realpen.live.device import Origin, PenDevice
 from realpen.live.messages import (
@@ -89,6 +90,10 @@ class Session:
             if error.seq is None and message is not None:
                 error.seq = message.seq
             return error.reply()
+        except ParameterError as error:  # a number no store can hold (the store's own check)
+            self.refused += 1
+            return Error(seq=getattr(message, "seq", None), code="invalid_message",
+                         message=str(error))
         except STORE_ERRORS as error:
             self.refused += 1
             log.error("stroke store: %s", error_line(error))

@@ -17,6 +17,12 @@ Nothing is stored twice: a stroke is known by its page and stroke number, a samp
 and number, so a page that resends what it is not sure arrived (after a reconnect) changes
 nothing that is already stored.
 
+Numbers are held to one range on both databases: a stroke or sample number, a study session or
+trial is at most :data:`~realpen.io.limits.MAX_STORED_INT` (PostgreSQL's INTEGER; SQLite would
+take more). The WebSocket schema refuses larger ones before they get here; the store refuses
+them too (a :class:`~realpen.errors.ParameterError`, nothing written), so no caller meets a
+database's own overflow error, which would read as a failure to retry.
+
 All writes run on the store's one writer thread (:class:`realpen.live.writer.BatchWriter`), in
 batches, each operation in its own SAVEPOINT; each write returns a
 :class:`concurrent.futures.Future` that resolves once its batch is committed.
@@ -44,8 +50,9 @@ from sqlalchemy.dialects import postgresql as pg_dialect
 from sqlalchemy.dialects import sqlite as sqlite_dialect
 from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 
-from realpen.errors import fail
+from realpen.errors import ParameterError, fail
 from realpen.io.files import atomic_path
+from realpen.io.limits import MAX_STORED_INT
 from realpen.io.strokes import SAMPLE_FIELDS, StrokeSample
 from realpen.live.writer import CHECKPOINT_S, WAL_CHECKPOINT_BYTES, BatchWriter, Statement
 from realpen.study.db import STORE_ERRORS, Database, error_line, open_database, store_file
@@ -69,8 +76,8 @@ _BY_PAGE = select(strokes.c.id, strokes.c.end_reason, strokes.c.page_t0, strokes
                   strokes.c.modality).where(strokes.c.page == bindparam("page"),
                                             strokes.c.page_stroke == bindparam("page_stroke"))
 _T0 = select(strokes.c.page_t0).where(strokes.c.id == bindparam("stroke"))
-_NEXT_SEQ = select(func.coalesce(func.max(samples.c.seq) + 1, 0)).where(
-    samples.c.stroke_id == bindparam("stroke"))
+# The last number, not max + 1: PostgreSQL's INTEGER arithmetic would overflow at the last one.
+_LAST_SEQ = select(func.max(samples.c.seq)).where(samples.c.stroke_id == bindparam("stroke"))
 _SAMPLE_COUNT = select(strokes.c.sample_count).where(strokes.c.id == bindparam("stroke"))
 _ADD_COUNT = update(strokes).where(strokes.c.id == bindparam("stroke")).values(
     sample_count=strokes.c.sample_count + bindparam("added")).returning(strokes.c.sample_count)
@@ -83,6 +90,19 @@ _COUNT = select(func.count(), func.coalesce(func.sum(strokes.c.sample_count), 0)
 
 def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+def _check_stored(name: str, value: int | None, minimum: int = 0) -> None:
+    """Refuse a number the store cannot hold (None passes: no value)."""
+    if value is not None and not minimum <= value <= MAX_STORED_INT:
+        raise ParameterError(name, f"must be {minimum} to {MAX_STORED_INT}, got {value}")
+
+
+def _check_last_sample(first: int, count: int) -> None:
+    """Refuse a batch whose last sample's number the store cannot hold."""
+    if count and first + count - 1 > MAX_STORED_INT:
+        raise ParameterError("samples", f"the last sample would be number {first + count - 1}; "
+                                        f"sample numbers go up to {MAX_STORED_INT}")
 
 
 class StrokeRef(tuple):
@@ -137,7 +157,7 @@ class StrokeStore:
         self.created = self.database.created
         dialect = self.database.engine.dialect
         self._sql = {name: Statement(statement, dialect) for name, statement in (
-            ("by_page", _BY_PAGE), ("t0", _T0), ("next_seq", _NEXT_SEQ),
+            ("by_page", _BY_PAGE), ("t0", _T0), ("last_seq", _LAST_SEQ),
             ("sample_count", _SAMPLE_COUNT), ("add_count", _ADD_COUNT),
             ("insert_samples", _INSERT_SAMPLES[self.dialect]))}
         self._t0: dict[int, float] = {}  # stroke id → page t0 (writer thread only)
@@ -256,7 +276,9 @@ class StrokeStore:
                 raise KeyError(f"no stroke with id {stroke_id}")
             t0 = self._t0[stroke_id] = found[0]
         if first is None:  # no numbering from the page: after the last number stored
-            first = self.writer.execute(conn, sql["next_seq"], key).fetchone()[0]
+            last = self.writer.execute(conn, sql["last_seq"], key).fetchone()[0]
+            first = 0 if last is None else last + 1
+            _check_last_sample(first, len(rows))
         added = 0
         if rows:
             insert = sql["insert_samples"]
@@ -312,7 +334,14 @@ class StrokeStore:
         (the session's id in the store, the trial's number), if any. A pen-down the page
         already sent returns the same stroke, and reopens it if the server had ended it for
         the page (a disconnect, a crash).
+
+        Raises:
+            ParameterError: ``page_stroke`` (0 up), ``study_session`` or ``trial`` (1 up)
+                above :data:`~realpen.io.limits.MAX_STORED_INT`; nothing is written.
         """
+        _check_stored("page_stroke", page_stroke)
+        _check_stored("study_session", study_session, 1)
+        _check_stored("trial", trial, 1)
         fields = {"session": session, "page": page or session, "page_stroke": page_stroke,
                   "pen": pen, "profile_version": profile_version, "modality": modality,
                   "ink": ink, "pointer_type": pointer_type, "px_per_mm": px_per_mm,
@@ -331,7 +360,15 @@ class StrokeStore:
                 degrees, mm/s); ``t`` is stored in s since pen down.
             first: the number of the first sample within the stroke, as the page counts
                 (a sample number already stored is not stored again); None: after the last.
+
+        Raises:
+            ParameterError: a sample's number above :data:`~realpen.io.limits.MAX_STORED_INT`
+                (raised here for a given ``first``; with ``first=None`` the future holds it
+                when the stroke's numbers run out); nothing is written.
         """
+        _check_stored("first", first)
+        if first is not None:
+            _check_last_sample(first, len(samples))
         rows = [sample.as_row() if isinstance(sample, StrokeSample) else tuple(sample)
                 for sample in samples]
         return self.writer.submit_direct(self._append, stroke_id, rows, first)
@@ -431,7 +468,7 @@ def export_csv(store: str | os.PathLike, output: str | os.PathLike,
     database = open_database(store, create=False)
     try:
         with database.engine.connect() as conn, conn.begin():
-            if stroke is not None and (not 0 <= stroke < 2**31 or conn.execute(
+            if stroke is not None and (not 0 <= stroke <= MAX_STORED_INT or conn.execute(
                     select(strokes.c.id).where(strokes.c.id == stroke)).first() is None):
                 raise fail(database.display, f"no stroke with id {stroke}")
             written, rows = set(), 0

@@ -28,8 +28,10 @@ Studies:
 ``answers``       one row per question of an answered trial: the answer as text, whether it
                   was right (recognition questions; else NULL).
 
-Times are ISO 8601 text in UTC with milliseconds, the same on both databases. Ids and counts are
-32-bit integers (PostgreSQL's INTEGER): :data:`MAX_ID` is the largest an API accepts.
+Times are ISO 8601 text in UTC with milliseconds, the same on both databases. Ids, numbers and
+counts are 32-bit integers (PostgreSQL's INTEGER) on both: :data:`MAX_ID` is the largest any of
+them holds (:data:`realpen.io.limits.MAX_STORED_INT`, the one rule the WebSocket schema and the
+HTTP API share); only a session's plan seed is 64-bit.
 """
 
 from __future__ import annotations
@@ -51,12 +53,14 @@ from sqlalchemy import (
     false,
 )
 
+from realpen.io.limits import MAX_STORED_INT
 from realpen.io.strokes import SAMPLE_FIELDS
 
 __all__ = ["MAX_ID", "metadata", "strokes", "samples", "studies", "participants", "sessions", "trials",
            "answers", "END_REASONS", "SESSION_STATES", "PHASES"]
 
-MAX_ID = 2**31 - 1
+MAX_ID = MAX_STORED_INT
+"""The largest id, number or count a store holds (2**31 - 1, on SQLite as on PostgreSQL)."""
 END_REASONS = ("pen_up", "disconnect", "replaced", "shutdown", "crash")
 SESSION_STATES = ("running", "paused", "finished")
 PHASES = ("training", "experimental", "questionnaire")

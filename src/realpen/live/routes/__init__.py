@@ -4,7 +4,9 @@
 - :mod:`~realpen.live.routes.profiles` — the pens offered and their audio;
 - :mod:`~realpen.live.routes.strokes` — the pen-event WebSocket and ``/api/status``;
 - :mod:`~realpen.live.routes.studies` — the study pages and HTTP API;
-- :mod:`~realpen.live.routes.device` — the pen device, its command log, the pen patterns.
+- :mod:`~realpen.live.routes.device` — the pen device, its command log, the pen patterns;
+- :mod:`~realpen.live.routes.params` — no router: the integer URL parameters (digits only, in a
+  range) that the routers share.
 
 A new route goes into the router of its concern (or a new module here, added to
 :data:`ROUTERS`). Routes are thin: they reach the app's state through the :data:`State`

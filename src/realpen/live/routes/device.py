@@ -9,11 +9,13 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, HTTPException
 from fastapi.responses import Response
 
+from realpen.io.limits import MAX_JSON_INT
 from realpen.live.device import device_status
 from realpen.live.routes.pages import NO_CACHE
+from realpen.live.routes.params import url_int
 from realpen.live.routes.profiles import offered
 from realpen.live.state import State
 
@@ -31,8 +33,8 @@ def device(state: State) -> dict:
 
 
 @router.get("/api/device/log")
-def device_log(state: State, since: int = Query(0, ge=0, le=2**53),
-               limit: int = Query(DEVICE_LOG_PAGE, ge=1, le=DEVICE_LOG_PAGE)) -> dict:
+def device_log(state: State, since: url_int(0, MAX_JSON_INT) = 0,
+               limit: url_int(1, DEVICE_LOG_PAGE) = DEVICE_LOG_PAGE) -> dict:
     entries = getattr(state.device, "entries", None)
     if entries is None:
         raise HTTPException(404, f"the {state.device.name} device keeps no log")
@@ -43,8 +45,7 @@ def device_log(state: State, since: int = Query(0, ge=0, le=2**53),
 
 
 @router.get("/api/pens/{name}/pen-pattern")
-def pen_pattern(state: State, name: str,
-                rate: int = Query(..., ge=PEN_RATE_MIN, le=PEN_RATE_MAX)) -> Response:
+def pen_pattern(state: State, name: str, rate: url_int(PEN_RATE_MIN, PEN_RATE_MAX)) -> Response:
     entry = offered(state, name)
     data = state.pen_patterns.get(entry.profile, rate)  # a rate it cannot take: 422
     return Response(data, media_type="application/octet-stream", headers={

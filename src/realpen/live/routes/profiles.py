@@ -11,11 +11,11 @@ from __future__ import annotations
 from typing import Literal
 
 from fastapi import APIRouter, HTTPException
-from fastapi import Path as PathParam
 from fastapi.responses import Response
 
 from realpen.live.catalog import CatalogEntry
 from realpen.live.routes.pages import NO_CACHE
+from realpen.live.routes.params import STORED_NUMBER
 from realpen.live.state import State
 
 __all__ = ["router", "offered"]
@@ -45,7 +45,7 @@ def profile_audio(state: State, name: str, part: Literal["sound", "tactile"]) ->
 
 
 @router.get("/api/profiles/{name}/grid/{index}.wav")
-def grid_audio(state: State, name: str, index: int = PathParam(ge=0)) -> Response:
+def grid_audio(state: State, name: str, index: STORED_NUMBER) -> Response:
     entry = offered(state, name)
     try:
         data = entry.point_wav(index)

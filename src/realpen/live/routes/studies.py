@@ -1,6 +1,7 @@
 """The study routes: the operator console, the participant screen and the study HTTP API.
 
-Thin: each route validates its request, runs one operation of :mod:`realpen.study.sessions` on
+Thin: each route validates its request (ids in the URL: digits only, 1 to 2,147,483,647,
+:mod:`realpen.live.routes.params`), runs one operation of :mod:`realpen.study.sessions` on
 the store's writer (so its reply is sent only after the commit) and lets a
 :class:`~realpen.study.sessions.StudyError` through to the app's one error handler
 (:mod:`realpen.live.errors`), which replies with its kind's status and a one-line ``detail``.
@@ -26,7 +27,7 @@ from concurrent.futures import Future
 from pathlib import Path
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy.exc import IntegrityError
@@ -35,17 +36,17 @@ from starlette.concurrency import run_in_threadpool
 from realpen.errors import RealPenError
 from realpen.live.catalog import CatalogEntry, playable_wav
 from realpen.live.routes.pages import static_page
+from realpen.live.routes.params import STORED_ID, url_int
 from realpen.live.state import State
 from realpen.study import sessions as study
 from realpen.study.db import STORE_ERRORS, error_line
 from realpen.study.design import MAX_ANSWER_CHARS, Design
 from realpen.study.patterns import PatternCache
-from realpen.study.tables import MAX_ID
 
 __all__ = ["router", "load_designs", "SessionBody", "AnswerBody", "StateBody", "REQUEST_WAIT_S"]
 
 REQUEST_WAIT_S = 30.0  # a request waits at most this long for the store, then gets 503
-Id = Annotated[int, Field(ge=1, le=MAX_ID)]
+Id = STORED_ID
 
 router = APIRouter()
 
@@ -171,7 +172,7 @@ async def open_session(state: State, body: SessionBody) -> JSONResponse:
 
 
 @router.get("/api/sessions")
-async def sessions_list(state: State, limit: int = Query(200, ge=1, le=1000)) -> Response:
+async def sessions_list(state: State, limit: url_int(1, 1000) = 200) -> Response:
     return JSONResponse({"sessions": await _read(state, study.list_sessions, state.design_cache,
                                                  limit)})
 

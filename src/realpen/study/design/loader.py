@@ -2,7 +2,9 @@
 
 :func:`load_design` reads a built-in design by name (``study1``, ``study2``) or a ``.yaml``,
 ``.yml`` or ``.json`` file — bounded in bytes and in values (YAML aliases included), YAML read
-safely with duplicate keys refused — and validates it
+safely with duplicate keys refused and numbers of at most
+:data:`~realpen.io.limits.MAX_NUMBER_CHARS` characters, as in JSON (Python will not turn a
+5,000-digit integer into text, and its arithmetic on such numbers is slow) — and validates it
 (:func:`realpen.study.design.schema.validate_design`).
 
 May import: :mod:`realpen.errors`, :mod:`realpen.io`, the other modules of
@@ -17,13 +19,21 @@ from pathlib import Path
 from typing import Any
 
 from realpen.errors import ParameterError, fail
-from realpen.io.limits import check_size, count_values, load_json, read_bounded
+from realpen.io.limits import (
+    MAX_NUMBER_CHARS,
+    check_size,
+    count_values,
+    load_json,
+    read_bounded,
+)
 from realpen.study.design.constants import MAX_DESIGN_BYTES, MAX_DESIGN_VALUES
+from realpen.study.design.messages import field_path
 from realpen.study.design.schema import Design, validate_design
 
 __all__ = ["builtin_designs", "builtin_path", "load_design"]
 
 _BUILTIN = ("study1", "study2")
+_NUMBER_TAGS = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
 
 
 def builtin_designs() -> list[str]:
@@ -85,8 +95,21 @@ def _load_yaml(path: Path) -> Any:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:
         raise fail(path, f"is not UTF-8 text ({error.reason} at byte {error.start})") from None
+    loader = _loader()(text)
     try:
-        return yaml.load(text, Loader=_loader())  # noqa: S506 - a SafeLoader subclass
+        # Composed, checked, then built: a number is refused before Python converts it.
+        root = loader.get_single_node()
+        if root is None:
+            return None
+        long_number = _long_number(root)
+        if long_number is not None:
+            loc, node = long_number
+            what = "a key that is a number" if loc and loc[-1] == "[key]" else "a number"
+            where = field_path(loc)
+            raise fail(path, f"{where + ': ' if where else ''}{what} of {len(node.value):,} "
+                             f"characters (line {node.start_mark.line + 1}); numbers are "
+                             f"limited to {MAX_NUMBER_CHARS}")
+        return loader.construct_document(root)
     except yaml.MarkedYAMLError as error:
         mark = error.problem_mark or error.context_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
@@ -101,6 +124,35 @@ def _load_yaml(path: Path) -> Any:
         raise fail(path, f"YAML syntax error: {' '.join(str(error).split())}") from None
     except RecursionError:
         raise fail(path, "is nested too deeply") from None
+    finally:
+        loader.dispose()
+
+
+def _long_number(root) -> tuple[tuple, Any] | None:
+    """The first number (in document order) written with more than :data:`MAX_NUMBER_CHARS`
+    characters, as (its location, its node), or None. A mapping's key has the location of its
+    value with ``"[key]"`` in place of the key's name. Each node is seen once, however many
+    aliases name it."""
+    import yaml
+
+    seen: set[int] = set()
+    stack = [(root, ())]
+    while stack:
+        node, loc = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.ScalarNode):
+            if node.tag in _NUMBER_TAGS and len(node.value) > MAX_NUMBER_CHARS:
+                return loc, node
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend((item, (*loc, i)) for i, item in reversed(list(enumerate(node.value))))
+        elif isinstance(node, yaml.MappingNode):
+            for key, value in reversed(node.value):
+                name = key.value if isinstance(key, yaml.ScalarNode) else "?"
+                stack.append((value, (*loc, name)))
+                stack.append((key, (*loc, "[key]")))
+    return None
 
 
 _LOADER = None
