@@ -8,6 +8,7 @@ client, and writes its WAV when interrupted.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -251,3 +252,72 @@ def test_sim_says_when_its_firmware_dies_and_still_writes_the_wav(tmp_path):
                          f"{port}: the simulated pen's firmware exited by itself (code -9); "
                          f"wrote {record}: ")
     assert sf.info(str(record)).samplerate == 8000
+
+
+def _process_status(pid: int) -> dict[str, str]:
+    """The fields of ``/proc/PID/status`` (State, SigPnd, ShdPnd, …)."""
+    with open(f"/proc/{pid}/status") as status:
+        return {key: value.strip() for key, value in
+                (line.split(":", 1) for line in status if ":" in line)}
+
+
+def _wait_for(condition, what: str, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f"no {what} within {timeout} s"
+        time.sleep(0.01)
+
+
+def _stderr_line(process: subprocess.Popen, timeout: float = 30.0) -> str:
+    """The next line ``process`` writes on stderr ('' at its end or after ``timeout`` s)."""
+    import selectors
+
+    with selectors.DefaultSelector() as selector:
+        selector.register(process.stderr, selectors.EVENT_READ)
+        if not selector.select(timeout):
+            return ""
+    return process.stderr.readline()
+
+
+@pytest.mark.firmware
+@pytest.mark.slow
+def test_a_second_ctrl_c_while_sim_stops_still_writes_the_wav(tmp_path):
+    # The firmware is held (SIGSTOP) so that sim's stop waits for it: the second Ctrl-C then
+    # certainly comes while the recording is being stopped and written, not before or after.
+    record, temporary = tmp_path / "pen.wav", tmp_path / "tmp"
+    temporary.mkdir()  # sim's working folder goes here: what it leaves behind can be seen
+    process = subprocess.Popen([sys.executable, "-m", "realpen", "device", "sim", "--record",
+                                str(record)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, env={**os.environ, "TMPDIR": str(temporary)})
+    firmware = None
+    try:
+        port = process.stdout.readline().split(": ", 1)[1].strip()
+        with PenClient(open_transport(port)) as client:
+            client.upload(np.full(800, 8000, np.int16), 8000)
+            client.set_state(True, 1.0)
+            client.sync()
+            wait_until_played(process.pid, FULL_SCALE_8000, 0.05 * 8000)
+        firmware = int(open(f"/proc/{process.pid}/task/{process.pid}/children").read().split()[0])
+        os.kill(firmware, signal.SIGSTOP)
+        _wait_for(lambda: _process_status(firmware)["State"].startswith("T"), "stopped firmware")
+        process.send_signal(signal.SIGINT)
+        # sim's stop has sent the firmware its SIGINT: it waits for the firmware to close.
+        _wait_for(lambda: int(_process_status(firmware)["ShdPnd"], 16) & 1 << signal.SIGINT - 1
+                  or process.poll() is not None, "SIGINT for the firmware")
+        process.send_signal(signal.SIGINT)
+        said = _stderr_line(process)
+        os.kill(firmware, signal.SIGCONT)
+        out, err = process.communicate(timeout=30)
+    finally:
+        if firmware is not None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(firmware, signal.SIGCONT)
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert said == f"still writing {record}, one moment\n", (said, err)
+    assert process.returncode == 0, err
+    assert "Traceback" not in err and f"wrote {record}" in out
+    samples, rate = sf.read(record, dtype="int16")
+    assert rate == 8000 and (samples == FULL_SCALE_8000).sum() > 0.05 * 8000
+    assert sorted(path.name for path in tmp_path.rglob("*")) == ["pen.wav", "tmp"]

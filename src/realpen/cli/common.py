@@ -26,7 +26,7 @@ except ImportError:  # pragma: no cover - every supported typer has it
 __all__ = ["CONTEXT_SETTINGS", "command_group", "LazyConsole", "console", "err_console",
            "print_line", "PROGRESS_AFTER_S", "progress_bar", "force_option", "check_outputs",
            "same_file", "whole_number", "design_input", "working", "terminate_as_interrupt",
-           "DefaultCommandGroup"]
+           "InterruptOnce", "DefaultCommandGroup"]
 
 
 class LazyConsole:
@@ -259,3 +259,56 @@ def terminate_as_interrupt() -> Iterator[None]:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+class InterruptOnce:
+    """Within the block the first SIGINT, SIGTERM or SIGHUP ends the work as Ctrl-C does
+    (KeyboardInterrupt); once one has come, or :meth:`hold` was called, later ones only print
+    ``note`` on stderr, so that the clean-up that follows (writing a recording, removing
+    temporary files) is not itself cut short. The previous handlers come back at the end.
+
+    Args:
+        note: what a held signal prints, e.g. ``"still writing pen.wav, one moment"``.
+
+    Example:
+        >>> with InterruptOnce("still writing, one moment") as interrupts:
+        ...     interrupts.hold()
+        ...     os.kill(os.getpid(), signal.SIGINT)  # held (the note goes to stderr)
+        ...     interrupts.held
+        1
+    """
+
+    def __init__(self, note: str) -> None:
+        self.note = note
+        self.held = 0  # signals that came while holding
+        self._holding = False
+        self._previous: dict[int, Any] = {}
+
+    def hold(self) -> None:
+        """From now on a signal only prints the note."""
+        self._holding = True
+
+    def _signal(self, signum, frame) -> None:
+        if not self._holding:
+            # Switched before raising: a second signal, however soon, cannot interrupt what
+            # the first one starts.
+            self._holding = True
+            raise KeyboardInterrupt
+        self.held += 1
+        with contextlib.suppress(OSError, RuntimeError, ValueError):  # stderr gone or busy
+            print(self.note, file=sys.stderr, flush=True)
+
+    def __enter__(self) -> InterruptOnce:
+        wanted = [sig for sig in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None))
+                  if sig is not None]
+        try:
+            for sig in wanted:  # SIGINT too where a shell ignored it (`realpen … &`)
+                self._previous[sig] = signal.signal(sig, self._signal)
+        except ValueError:  # not the main thread (an embedding program): leave signals alone
+            self.__exit__()
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()

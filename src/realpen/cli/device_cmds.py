@@ -7,7 +7,6 @@ numpy and the simulated pen (:mod:`realpen.device`) are imported inside the comm
 import contextlib
 import errno
 import os
-import signal
 import statistics
 import tempfile
 import time
@@ -18,6 +17,7 @@ import typer
 
 from realpen.checks import require_number
 from realpen.cli.common import (
+    InterruptOnce,
     check_outputs,
     command_group,
     console,
@@ -340,24 +340,27 @@ def sim(
     pen = SimPen(record=record, trace=trace)
     port = None
     interrupted = False
-    # A shell starts a background job (`realpen device sim &`) with SIGINT ignored; a script
-    # that stops it with SIGINT must still get the recording.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        with terminate_as_interrupt():
-            try:
-                pen.start()
-                port = pen.port
-                print(f"port: {port}", flush=True)  # the line a script reads: first, whole
-                print(f"  the pen's firmware runs there ('realpen device --port {port} info'; "
-                      f"the live app: 'realpen serve --device serial:{port}'); Ctrl-C stops it"
-                      f"{f' and writes {record}' if record else ''}", flush=True)
-                while pen.alive:
-                    time.sleep(0.1)
-            except KeyboardInterrupt:
-                interrupted = True
-    finally:
-        pen.stop()  # also after a failure: the firmware never outlives the command
+    # The first Ctrl-C (or SIGTERM) stops the pen; one more while the recording is written
+    # only says so: the WAV is still written and the temporary files removed. A shell starts
+    # a background job (`realpen device sim &`) with SIGINT ignored; a script that stops it
+    # with SIGINT must still get the recording, so SIGINT is taken in any case.
+    interrupts = InterruptOnce(f"still writing {record}, one moment" if record is not None
+                               else "still stopping the simulated pen, one moment")
+    with interrupts:
+        try:
+            pen.start()
+            port = pen.port
+            print(f"port: {port}", flush=True)  # the line a script reads: first, whole
+            print(f"  the pen's firmware runs there ('realpen device --port {port} info'; "
+                  f"the live app: 'realpen serve --device serial:{port}'); Ctrl-C stops it"
+                  f"{f' and writes {record}' if record else ''}", flush=True)
+            while pen.alive:
+                time.sleep(0.1)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            interrupts.hold()
+            pen.stop()  # also after a failure: the firmware never outlives the command
     if not interrupted:  # it died (stop() has written the recording of what it played)
         wrote = f"; {_wrote(record)}" if record is not None else ""
         raise RealPenError(f"{port}: the simulated pen's firmware exited by itself (code "

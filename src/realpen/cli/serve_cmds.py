@@ -72,6 +72,7 @@ def serve(
     from realpen.live.auth import LOOPBACK_HOSTS, kept_token
     from realpen.live.device import open_device, parse_device
     from realpen.live.server import bind, lan_address, run, url_host
+    from realpen.study.db import STORE_ERRORS, store_error
 
     require_choice("tactile", tactile, TACTILE_CHOICES)
     if device is not None:
@@ -95,7 +96,10 @@ def serve(
         settings = LiveSettings(store=store, profiles=list(profiles), tactile=tactile,
                                 token=token, allowed_hosts=None if lan else LOOPBACK_HOSTS,
                                 designs=list(designs), device=pen)
-        live_app = create_app(settings)
+        try:
+            live_app = create_app(settings)
+        except STORE_ERRORS as error:  # opening the store writes (ending strokes a kill left open)
+            raise store_error(store, error) from None
     except BaseException:
         sock.close()
         if pen is not None:

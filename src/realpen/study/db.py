@@ -17,12 +17,15 @@ failed start; ``PRAGMA quick_check`` refuses a damaged file; WAL journal, ``sync
 know; stores of those versions (before Alembic) are upgraded in place.
 
 Every problem is one :class:`~realpen.errors.RealPenError` line naming the file, or the URL with
-its password hidden: cannot connect, not a RealPen store, a schema newer than this RealPen.
+its password hidden: cannot connect, not a RealPen store, a schema newer than this RealPen, or
+a full disk (:func:`disk_full`: opening a store writes — the journal, its index, a migration —
+so a full disk is said as such, whichever of them met it).
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import functools
 import os
 import re
@@ -44,7 +47,8 @@ except ImportError:  # pragma: no cover
     fcntl = None
 
 __all__ = ["Database", "open_database", "store_file", "hide_password", "head_revision",
-           "SQLITE_USER_VERSION", "BUSY_TIMEOUT_MS", "MIGRATIONS", "STORE_ERRORS", "error_line"]
+           "SQLITE_USER_VERSION", "BUSY_TIMEOUT_MS", "MIGRATIONS", "STORE_ERRORS", "error_line",
+           "disk_full", "store_error", "DISK_FULL_ROOM_BYTES"]
 
 SQLITE_USER_VERSION = 3
 """``PRAGMA user_version`` of a migrated SQLite store (1 and 2: the stroke store before Alembic)."""
@@ -55,6 +59,9 @@ STORE_ERRORS = (SQLAlchemyError, sqlite3.Error)
 driver's errors come wrapped by SQLAlchemy; ``sqlite3.Error`` from code that uses the driver)."""
 CONNECT_TIMEOUT_S = 10
 """How long opening a PostgreSQL connection may take (s)."""
+DISK_FULL_ROOM_BYTES = 1024 * 1024
+"""Below this much free space in the store's folder (bytes), an SQLite I/O error is taken for a
+full disk: SQLite reports a journal index it cannot grow as "disk I/O error", not as full."""
 MIGRATIONS = Path(__file__).with_name("migrations")
 """The Alembic script folder (``env.py`` and ``versions/``)."""
 _LEGACY_REVISION = "0001"  # the schema of user_version 2: strokes and samples
@@ -83,6 +90,79 @@ def error_line(error: BaseException) -> str:
     'database is locked'
     """
     return " ".join(str(getattr(error, "orig", None) or error).split())
+
+
+_DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
+_SQLITE_FULL, _SQLITE_IOERR = 13, 10  # primary result codes (the low byte of an extended one)
+_POSTGRESQL_DISK_FULL = "53100"  # SQLSTATE disk_full
+
+
+def disk_full(error: BaseException, folder: str | os.PathLike | None = None) -> bool:
+    """Whether ``error`` means that the disk holding the store has no room left.
+
+    Args:
+        error: an :class:`OSError` (``ENOSPC``, ``EDQUOT``), an SQLite error (SQLITE_FULL:
+            "database or disk is full"), a PostgreSQL one (SQLSTATE 53100), or SQLAlchemy's
+            wrapper of either.
+        folder: the SQLite file's folder: an SQLite I/O error counts as a full disk when it
+            has less than :data:`DISK_FULL_ROOM_BYTES` free (SQLite says "disk I/O error" when
+            it cannot grow the journal's index, the ``-shm`` file); None: it never does.
+
+    >>> disk_full(sqlite3.OperationalError("database or disk is full"))
+    True
+    >>> disk_full(OSError(errno.ENOSPC, "No space left on device"))
+    True
+    >>> disk_full(sqlite3.OperationalError("database is locked"))
+    False
+    """
+    orig = getattr(error, "orig", None) or error
+    if isinstance(orig, OSError):
+        return orig.errno in _DISK_FULL_ERRNOS
+    if isinstance(orig, sqlite3.Error):
+        code = getattr(orig, "sqlite_errorcode", None)
+        if code is None:  # made by code rather than by the driver: only its words tell
+            return str(orig) == "database or disk is full"
+        if code & 0xFF == _SQLITE_FULL:
+            return True
+        return (code & 0xFF == _SQLITE_IOERR and folder is not None
+                and _free_bytes(folder) < DISK_FULL_ROOM_BYTES)
+    return getattr(orig, "sqlstate", None) == _POSTGRESQL_DISK_FULL
+
+
+def _free_bytes(folder: str | os.PathLike) -> float:
+    """Bytes this process may still write in ``folder`` (infinite when it cannot be asked)."""
+    try:
+        stats = os.statvfs(folder)
+    except (OSError, AttributeError):  # no statvfs (Windows), or the folder is gone
+        return float("inf")
+    return stats.f_bavail * stats.f_frsize
+
+
+def _disk_full_line(where: object, error: BaseException | str,
+                    disk: str = "the disk") -> RealPenError:
+    """``"<where>: the disk is full (<the system's words>); free some space on it and try
+    again"`` (``disk``: whose disk, e.g. the database server's)."""
+    orig = getattr(error, "orig", None) or error
+    words = orig.strerror if isinstance(orig, OSError) and orig.strerror else error_line(orig)
+    return fail(where, f"{disk} is full ({words}); free some space on it and try again")
+
+
+def store_error(target: str | os.PathLike, error: BaseException) -> RealPenError:
+    """A store operation's failure (:data:`STORE_ERRORS`, or an :class:`OSError`) as one line
+    naming the store: that the disk is full (:func:`disk_full`), or the driver's words.
+
+    Args:
+        target: the store as :func:`open_database` took it (a URL's password is hidden).
+        error: what the operation raised.
+
+    >>> str(store_error("s.sqlite3", sqlite3.OperationalError("database or disk is full")))
+    's.sqlite3: the disk is full (database or disk is full); free some space on it and try again'
+    """
+    shown = hide_password(target)
+    file = store_file(target)
+    if disk_full(error, None if file is None else Path(os.path.abspath(file)).parent):
+        return _disk_full_line(shown, error, "the disk" if file else "the database server's disk")
+    return fail(shown, f"cannot use the store ({error_line(error)})")
 
 
 @dataclass(eq=False)
@@ -254,6 +334,8 @@ def _lock(path: Path) -> tuple[int | None, bool]:
         except FileExistsError:
             fd, created = os.open(path, os.O_RDWR), False
     except OSError as error:
+        if disk_full(error):
+            raise _disk_full_line(path, error) from None
         raise fail(path, f"cannot open or create the stroke store here "
                          f"({error.strerror or error})") from None
     if fcntl is None:
@@ -310,6 +392,8 @@ def _open_sqlite(path: Path, create: bool, lock: bool) -> Database:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as error:
+            if disk_full(error):
+                raise _disk_full_line(path, error) from None
             raise fail(path, f"cannot open or create the stroke store here "
                              f"({error.strerror or error})") from None
     database = Database(_sqlite_engine(path, writer=lock), "sqlite", path, str(path), created,
@@ -360,6 +444,8 @@ def _prepare_sqlite(database: Database, create: bool) -> None:
         raw = database.engine.raw_connection()
     except (DBAPIError, sqlite3.Error) as error:
         orig = getattr(error, "orig", None) or error
+        if disk_full(orig, path.parent):
+            raise _disk_full_line(path, orig) from None
         if isinstance(orig, sqlite3.OperationalError):
             raise fail(path, f"cannot open or create the stroke store here ({orig})") from None
         _raise_sqlite(path, error)
@@ -390,7 +476,9 @@ def _prepare_sqlite(database: Database, create: bool) -> None:
 
 def _raise_sqlite(path: Path, error: BaseException) -> NoReturn:
     orig = getattr(error, "orig", None) or error
-    if isinstance(orig, sqlite3.OperationalError):  # unreadable, read-only, locked, out of space
+    if disk_full(orig, path.parent):
+        raise _disk_full_line(path, orig) from None
+    if isinstance(orig, sqlite3.OperationalError):  # unreadable, read-only, locked
         raise fail(path, f"cannot use the stroke store ({orig})") from None
     # e.g. "file is not a database", a damaged page
     raise fail(path, f"not a RealPen stroke store, or a damaged one ({orig})") from None
@@ -471,6 +559,9 @@ def _open_postgresql(url: URL, shown: str, create: bool) -> Database:
             with connection.begin():
                 revision = _prepare_postgresql(connection, shown, create)
         except SQLAlchemyError as error:
+            if disk_full(error):
+                raise _disk_full_line(shown, _postgresql_message(error, url),
+                                      "the database server's disk") from None
             raise RealPenError(f"{shown}: cannot use the database "
                                f"({_postgresql_message(error, url)})") from None
         finally:
