@@ -22,8 +22,19 @@ With ``--before``, the two report folders of the last round are compared: the sa
 same PNG bytes and the same SVG (ids matplotlib draws at random made equal) and CSV text. The
 machine's load is printed before and after: a busy machine adds CPU time to every figure alike.
 
+``--scale`` measures instead what issue 25 asks of large studies, on one core (``taskset -c
+0`` where it exists, one BLAS thread): the report on ``--participants`` simulated participants
+of study 2 (default 1,000; goal: under 60 s) — CPU, wall time and peak RSS of the whole
+command — and the reading of a study-2 trials CSV just under the size limit
+(:data:`realpen.stats.data.MAX_TRIALS_BYTES`, made by copying the simulated participants under
+new codes): its size, read time and peak RSS (goal: at most 1 GB); ``--full-report`` also
+times the whole report on that file (goal: at most 1 GB too). Each report's ``report.html``
+and largest figure file are sized: the participants' layers are rasterised above 48
+participants, so neither grows with the participants.
+
 Usage: python benchmarks/bench_stats.py [--repeats 3] [--participants 12] [--before OLD/src]
        [--after NEW/src] [--studies study1 study2]
+       python benchmarks/bench_stats.py --scale [--participants 1000] [--full-report]
 """
 
 from __future__ import annotations
@@ -32,10 +43,12 @@ import argparse
 import json
 import os
 import re
+import shutil
 import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / "src"
@@ -157,15 +170,145 @@ def compare_folders(before: Path, after: Path) -> list[str]:
     return differences
 
 
+SCALE_GOAL_S = 60.0
+RSS_GOAL_BYTES = 1024**3
+READER = r'''
+import sys, time
+from realpen.stats.data import read_trials
+from realpen.study.design import load_design
+trials = read_trials(sys.argv[1], load_design("study2"))
+print(f"{len(trials.frame) + len(trials.training)} answers of {len(trials.participants)} participants")
+'''
+
+
+def one_core() -> list[str]:
+    """``taskset -c 0`` where it exists: the figures are for one core."""
+    return ["taskset", "-c", "0"] if shutil.which("taskset") else []
+
+
+def timed_run(command: list[str], src: Path) -> tuple[int, float, float, int, str]:
+    """Run ``command`` on one core: exit code, CPU s (user + system), wall s, peak RSS (bytes,
+    from ``os.wait4``) and its last output line."""
+    environment = child_environment(src)
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        environment[name] = "1"
+    started = time.perf_counter()
+    process = subprocess.Popen(one_core() + command, env=environment, stdout=subprocess.PIPE,
+                               stderr=subprocess.STDOUT, text=True)
+    output = process.stdout.read()
+    _, status, usage = os.wait4(process.pid, 0)
+    wall = time.perf_counter() - started
+    lines = output.strip().splitlines()
+    return (os.waitstatus_to_exitcode(status), usage.ru_utime + usage.ru_stime, wall,
+            usage.ru_maxrss * 1024, lines[-1] if lines else "")
+
+
+FIGURE_SUFFIXES = (".svg", ".png", ".pdf")
+
+
+def output_sizes(folder: Path) -> str:
+    """``report.html``'s size and the largest figure file's, in MB, for a report line."""
+    figures = [path for path in folder.iterdir() if path.suffix in FIGURE_SUFFIXES]
+    largest = max(figures, key=lambda path: path.stat().st_size, default=None)
+    text = f"report.html {(folder / 'report.html').stat().st_size / 1e6:.1f} MB"
+    if largest is not None:
+        text += f", largest figure {largest.name} {largest.stat().st_size / 1e6:.2f} MB"
+    return text
+
+
+def big_trials(small: Path, target: Path, limit: int) -> int:
+    """A study-2 trials CSV just under ``limit`` bytes: ``small``'s participants copied under
+    new codes (and sessions), whole participants only. Returns its size."""
+    header, *rows = small.read_text(encoding="utf-8").splitlines()
+    columns = header.split(",")
+    code, session = columns.index("participant"), columns.index("session")
+    blocks: list[list[str]] = []
+    for row in rows:
+        fields = row.split(",")
+        if not blocks or fields[code] != blocks[-1][0].split(",")[code]:
+            blocks.append([])
+        blocks[-1].append(row)
+    size = len(header) + 1
+    with open(target, "w", encoding="utf-8") as out:
+        out.write(header + "\n")
+        copy = 0
+        while True:
+            copy += 1
+            for block in blocks:
+                lines = []
+                for row in block:
+                    fields = row.split(",")
+                    fields[code] = f"C{copy:03d}{fields[code]}"
+                    fields[session] = str(int(fields[session]) + copy * len(blocks))
+                    lines.append(",".join(fields) + "\n")
+                text = "".join(lines)
+                if size + len(text.encode("utf-8")) > limit:
+                    return size
+                out.write(text)
+                size += len(text.encode("utf-8"))
+
+
+def scale(args: argparse.Namespace) -> None:
+    """The figures of issue 25: the large report and the large CSV."""
+    src = args.after.resolve()
+    sys.path.insert(0, str(src))
+    from realpen.stats.data import MAX_TRIALS_BYTES
+
+    print(f"load before: {load()}")
+    with tempfile.TemporaryDirectory(prefix="bench-stats-scale-") as folder:
+        work = Path(folder)
+        trials = work / "study2.csv"
+        subprocess.run([sys.executable, "-m", "realpen", "stats", "simulate", "study2", "-n",
+                        str(args.participants), "-o", str(trials)], check=True,
+                       env=child_environment(src), stdout=subprocess.DEVNULL)
+        code, cpu, wall, rss, last = timed_run(
+            [sys.executable, "-m", "realpen", "stats", "study2", str(trials), "-o",
+             str(work / "report"), "--force"], src)
+        goal = "meets" if code == 0 and wall < SCALE_GOAL_S else "misses"
+        print(f"report of {args.participants:,} participants ({trials.stat().st_size:,} bytes): "
+              f"exit {code}, CPU {cpu:.1f} s, wall {wall:.1f} s, peak RSS {rss / 2**20:.0f} MiB "
+              f"({goal} the goal of {SCALE_GOAL_S:g} s wall on one core)")
+        if code == 0:
+            print(f"  {output_sizes(work / 'report')}")
+        big = work / "big.csv"
+        size = big_trials(trials, big, MAX_TRIALS_BYTES)
+        code, cpu, wall, rss, last = timed_run([sys.executable, "-c", READER, str(big)], src)
+        goal = "meets" if code == 0 and rss <= RSS_GOAL_BYTES else "misses"
+        print(f"read_trials of a {size:,}-byte CSV (limit {MAX_TRIALS_BYTES:,}): {last}; exit "
+              f"{code}, CPU {cpu:.1f} s, wall {wall:.1f} s, peak RSS {rss / 2**20:.0f} MiB "
+              f"({goal} the goal of {RSS_GOAL_BYTES / 2**30:g} GiB)")
+        if args.full_report:
+            code, cpu, wall, rss, last = timed_run(
+                [sys.executable, "-m", "realpen", "stats", "study2", str(big), "-o",
+                 str(work / "big-report"), "--force"], src)
+            goal = "meets" if code == 0 and rss <= RSS_GOAL_BYTES else "misses"
+            print(f"report of that CSV: exit {code}, CPU {cpu:.1f} s, wall {wall:.1f} s, peak "
+                  f"RSS {rss / 2**20:.0f} MiB ({goal} the goal of {RSS_GOAL_BYTES / 2**30:g} "
+                  "GiB)")
+            if code == 0:
+                print(f"  {output_sizes(work / 'big-report')}")
+    print(f"load after: {load()}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=3, help="runs of each report (median shown)")
-    parser.add_argument("--participants", type=int, default=12)
+    parser.add_argument("--participants", type=int, default=None,
+                        help="simulated participants (default 12; 1000 with --scale)")
+    parser.add_argument("--scale", action="store_true",
+                        help="one core: the report of many participants and a CSV at the limit")
+    parser.add_argument("--full-report", action="store_true",
+                        help="with --scale: also the whole report of the CSV at the limit")
     parser.add_argument("--studies", nargs="+", default=["study1", "study2"])
     parser.add_argument("--before", type=Path, help="the src folder of the code to compare with")
     parser.add_argument("--after", type=Path, default=SRC,
                         help="the src folder of the code to measure (default: this checkout's)")
     args = parser.parse_args()
+    if args.participants is None:
+        args.participants = 1000 if args.scale else 12
+    if args.scale:
+        scale(args)
+        return
     for src in filter(None, (args.before, args.after)):
         if not (src / "realpen" / "__init__.py").is_file():
             raise SystemExit(f"{src}: not a src folder with realpen in it")

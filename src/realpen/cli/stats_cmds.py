@@ -239,14 +239,16 @@ def simulate(
     Data to try the analysis on before a study: `realpen stats DESIGN trials.csv -o report`.
     """
     from realpen.stats.power import response_model
-    from realpen.stats.simulate import simulate_store, simulated_trials, write_simulated
+    from realpen.stats.simulate import check_simulated_size, simulate_store, write_simulated_trials
     from realpen.study.design import load_design
 
     check_outputs(output, force=force, inputs=design_input(design))
     loaded = load_design(design)
     model = response_model(effect=effect, rates=rates)
+    check_simulated_size(loaded, participants, output, model=model, seed=seed,
+                         store=store is not None)
     if store is None:
-        write_simulated(simulated_trials(loaded, participants, model=model, seed=seed), output)
+        write_simulated_trials(loaded, participants, output, model=model, seed=seed)
     else:
         from realpen.study.db import store_file
         from realpen.study.export import export_trials, sidecar_path

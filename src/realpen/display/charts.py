@@ -19,6 +19,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
@@ -26,7 +27,8 @@ from realpen.display.axes import axes_list
 
 __all__ = ["PALETTE", "MARKERS", "MEAN_COLOUR", "PARTICIPANT_COLOUR", "label_text", "factor_label",
            "likert_limits", "panels", "panel_title", "style_axes", "draw_mean_ci",
-           "draw_participant_lines", "draw_participant_dots", "level_axis", "cell_outline"]
+           "draw_participant_lines", "draw_participant_dots", "level_axis", "cell_outline",
+           "MAX_VECTOR_PARTICIPANTS", "MAX_VECTOR_STEPS", "participant_alpha"]
 
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000")
 """Okabe & Ito's colour-blind-safe colours (their yellow left out: unreadable on white)."""
@@ -37,6 +39,31 @@ MEAN_COLOUR = "#1a1a1a"
 """The colour of a group's means (near black)."""
 PARTICIPANT_COLOUR = "#8c8c8c"
 """The grey of each participant's own values, behind the means."""
+MAX_VECTOR_PARTICIPANTS = 48
+"""The most participants whose lines or dots are drawn as shapes of their own. Beyond it
+thousands of shapes would make files of tens of MB that a browser barely opens, and a grey too
+dense to read: lines are aggregated (:func:`draw_participant_lines`) and dots drawn as one
+image layer (rasterised in SVG and PDF, the means and axes staying vector), each fainter
+(:func:`participant_alpha`)."""
+MAX_VECTOR_STEPS = 1000
+"""The most distinct steps :func:`draw_participant_lines` draws as vector lines when it
+aggregates; more (values that rarely repeat) are rasterised."""
+PARTICIPANT_ALPHA_FLOOR = 0.02
+"""The faintest a participant's line or dot is drawn (opacity): fainter would vanish when the
+image's 8-bit colours round it."""
+
+
+def participant_alpha(count: int, alpha: float) -> float:
+    """The opacity of each of ``count`` participants' lines or dots drawn at ``alpha`` up to
+    :data:`MAX_VECTOR_PARTICIPANTS`: the same up to there, beyond it scaled down so that the
+    layer's darkness follows how many participants overlap rather than saturating.
+
+    >>> participant_alpha(12, 0.5), participant_alpha(480, 0.5), participant_alpha(10**5, 0.5)
+    (0.5, 0.05, 0.02)
+    """
+    if count <= MAX_VECTOR_PARTICIPANTS:
+        return alpha
+    return max(alpha * MAX_VECTOR_PARTICIPANTS / count, PARTICIPANT_ALPHA_FLOOR)
 
 
 def label_text(value: object) -> str:
@@ -136,9 +163,16 @@ def draw_participant_lines(ax: Axes, x: np.ndarray, matrix: pd.DataFrame, *,
     line behind the means.
 
     With ``spread`` > 0 the lines are shifted apart by fixed amounts within ±``spread`` (in the
-    axis's unit), so that tied values (Likert answers) stay visible.
+    axis's unit), so that tied values (Likert answers) stay visible. Above
+    :data:`MAX_VECTOR_PARTICIPANTS` participants, where a line per participant would only make
+    a grey block, the lines are aggregated instead (``spread`` unused): each distinct step
+    between neighbouring levels one line, as wide as how many participants took it, each
+    distinct value one dot, as large as how many gave it.
     """
     count = len(matrix)
+    if count > MAX_VECTOR_PARTICIPANTS:
+        _participant_steps(ax, np.asarray(x, dtype=float), matrix.to_numpy(dtype=float))
+        return
     for k, (_, values) in enumerate(matrix.iterrows()):
         shift = ((k - (count - 1) / 2) / max(count - 1, 1)) * 2 * spread if count > 1 else 0.0
         y = values.to_numpy(dtype=float) + shift
@@ -146,10 +180,39 @@ def draw_participant_lines(ax: Axes, x: np.ndarray, matrix: pd.DataFrame, *,
                 zorder=2)
 
 
+def _participant_steps(ax: Axes, x: np.ndarray, values: np.ndarray) -> None:
+    """:func:`draw_participant_lines` of many participants, aggregated: each distinct step
+    from one level's value to the next level's is one line, as wide as how many participants
+    took it (the widest: the most, in this panel), and each distinct value one dot, as large
+    as how many gave it. A missing value breaks a participant's line there, as before."""
+    segments, taken = [], []
+    for j in range(values.shape[1] - 1):
+        pair = values[:, j:j + 2]
+        steps, counts = np.unique(pair[np.isfinite(pair).all(axis=1)], axis=0,
+                                  return_counts=True)
+        segments += [((x[j], a), (x[j + 1], b)) for a, b in steps]
+        taken += list(counts)
+    if segments:
+        share = np.asarray(taken, dtype=float) / max(taken)
+        lines = LineCollection(segments, colors=PARTICIPANT_COLOUR, linewidths=0.3 + 4.5 * share,
+                               alpha=0.45, zorder=2, capstyle="round")
+        lines.set_rasterized(len(segments) > MAX_VECTOR_STEPS)
+        ax.add_collection(lines, autolim=False)
+    columns = np.broadcast_to(x, values.shape)[np.isfinite(values)]
+    points, counts = np.unique(np.column_stack([columns, values[np.isfinite(values)]]), axis=0,
+                               return_counts=True)
+    if len(points):
+        dots = ax.scatter(points[:, 0], points[:, 1], s=6.0 + 60.0 * counts / counts.max(),
+                          color=PARTICIPANT_COLOUR, alpha=0.6, linewidths=0, zorder=2)
+        dots.set_rasterized(len(points) > MAX_VECTOR_STEPS)
+
+
 def draw_participant_dots(ax: Axes, x: float, values: np.ndarray, *, colour: str, width: float,
                           span: float) -> None:
     """Values as faint dots beside ``x``; equal (or nearly, within 2 % of ``span``, the axis's
-    range) values are spread sideways within ``width`` so each one shows."""
+    range) values are spread sideways within ``width`` so each one shows. Above
+    :data:`MAX_VECTOR_PARTICIPANTS` values the dots are rasterised and fainter
+    (:func:`participant_alpha`)."""
     values = np.asarray(values, dtype=float)
     values = values[np.isfinite(values)]
     if values.size == 0:
@@ -161,7 +224,10 @@ def draw_participant_dots(ax: Axes, x: float, values: np.ndarray, *, colour: str
         members = np.flatnonzero(bins == b)
         step = min(width / max(len(members), 1), 0.05)
         offsets[members] = (np.arange(len(members)) - (len(members) - 1) / 2) * step
-    ax.scatter(x + offsets, values, s=12, color=colour, alpha=0.5, linewidths=0, zorder=2)
+    dots = ax.scatter(x + offsets, values, s=12, color=colour,
+                      alpha=participant_alpha(values.size, 0.5), linewidths=0, zorder=2)
+    if values.size > MAX_VECTOR_PARTICIPANTS:
+        dots.set_rasterized(True)
 
 
 def level_axis(ax: Axes, levels: Sequence[str], label: str, *, rotate: bool = False) -> None:

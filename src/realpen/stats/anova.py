@@ -36,7 +36,7 @@ from realpen.stats.results import TEST_COLUMNS, tidy
 from realpen.stats.results import test_row as _result_row  # pytest would collect "test_row"
 
 __all__ = ["rm_anova", "rm_anova_table", "effect_row", "pairwise", "SPHERICITY_ALPHA", "ADJUSTMENTS",
-           "CONTRAST_SOURCE"]
+           "CONTRAST_SOURCE", "LIBRARY_MAX_VALUES"]
 
 SPHERICITY_ALPHA = 0.05
 """Mauchly's test at this level sets the ``sphericity`` column (True: not rejected)."""
@@ -47,6 +47,15 @@ CONTRAST_SOURCE = ("F, df and p (each effect against its own effect × subject e
                    "Huynh-Feldt (Lecoutre) epsilon and Mauchly's test, all from orthonormal "
                    "contrasts")
 """``method`` of an ANOVA whose every number comes from :func:`realpen.stats.contrasts.contrast_anova`."""
+LIBRARY_MAX_VALUES = 2048
+"""The most values (subjects × cells) :func:`rm_anova` refits with statsmodels and pingouin.
+
+statsmodels' AnovaRM solves a least-squares problem with a column for every subject × effect,
+so its time grows with the cube of the subjects: 2 s for 200 subjects of 9 cells, about 4 min
+for 1,000. Above this many values every number comes from the closed-form sums of squares of
+orthonormal contrasts (:func:`realpen.stats.contrasts.contrast_anova`, milliseconds at any
+size), which the tests check agree with the libraries within 1e-9 relative; ``method`` names
+the source either way."""
 
 
 # --- sphericity and effect sizes from pingouin -----------------------------------------------
@@ -93,6 +102,10 @@ def rm_anova(data: pd.DataFrame, *, dv: str, within: str | list[str], subject: s
     effect's orthonormal contrasts (Kronecker products of Helmert contrasts): ε_GG =
     tr(S)² / (d·tr(S²)) (Greenhouse & Geisser 1959), ε_HF as above (Huynh & Feldt 1976),
     Mauchly's W = det(S) / (tr(S)/d)^d with R's chi-square approximation (Mauchly 1940).
+
+    Above :data:`LIBRARY_MAX_VALUES` values (subjects × cells) the libraries' refits would take
+    minutes, and every number comes from the contrasts instead, as for three factors (the same
+    numbers within 1e-9 relative; ``method`` says which source gave them).
 
     An effect with one degree of freedom (a factor of 2 levels) has sphericity trivially: ε = 1,
     ``mauchly_w`` and ``p_mauchly`` are NaN and ``p_gg`` = ``p_hf`` = ``p``.
@@ -148,18 +161,21 @@ def rm_anova(data: pd.DataFrame, *, dv: str, within: str | list[str], subject: s
         >>> print(f"ges = {row.effect_size:.3f}, eps_gg = {row.eps_gg:.3f}, p_gg = {row.p_gg:.4f}")
         ges = 0.514, eps_gg = 0.750, p_gg = 0.0074
     """
-    return rm_anova_table(data, dv=dv, within=within, subject=subject, with_pingouin=True)
+    return rm_anova_table(data, dv=dv, within=within, subject=subject, with_pingouin=None)
 
 
 def rm_anova_table(data: pd.DataFrame, *, dv: str, within: str | list[str], subject: str,
-                   with_pingouin: bool) -> pd.DataFrame:
+                   with_pingouin: bool | None) -> pd.DataFrame:
     """:func:`rm_anova`; with ``with_pingouin`` false every number (F and p too) comes from
     :func:`realpen.stats.contrasts.contrast_anova` for any number of factors, without the
-    libraries' refits (the tests check it agrees with statsmodels and pingouin)."""
+    libraries' refits (the tests check it agrees with statsmodels and pingouin); None: the
+    libraries up to :data:`LIBRARY_MAX_VALUES` values, the contrasts above."""
     factors = factor_list(within)
     wide = balanced_wide(data, dv=dv, within=factors, subject=subject)
     y = wide.to_numpy(dtype=float)
     n = len(wide)
+    if with_pingouin is None:
+        with_pingouin = y.size <= LIBRARY_MAX_VALUES
     parts = contrast_anova(y, [len(level) for level in wide.columns.levels])
     zero = ZERO_FRACTION * float((y ** 2).sum())
     widest = int(np.prod([len(level) - 1 for level in wide.columns.levels]))

@@ -13,6 +13,14 @@ participants miss a planned cell.
 
 Every problem is one line that names the file, the line or the participant and cell, and the
 problem.
+
+A trials CSV is read in bounded memory: at most :data:`MAX_TRIALS_BYTES` (256 MiB, some 2.5
+million answers; a larger file is refused before it is read, so no file can make the reading
+slow or large), streamed :data:`CHUNK_ROWS` records at a time into compact columns (text as
+categories, numbers as arrays): a file just under the limit peaks near 600 MB. A UTF-8
+byte-order mark at its start (Excel writes one) is skipped. A rating must be a plain whole
+number (``3``, ``-3``), not ``+3``, ``3.0``, ``1e0`` or `` 3``: the export writes none of
+those, and a spreadsheet that did may have changed more than the spelling.
 """
 
 from __future__ import annotations
@@ -24,22 +32,34 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from pandas.api.types import union_categoricals
 
-from realpen.errors import fail
+from realpen.errors import RealPenError, fail
 from realpen.io.files import check_readable_file
-from realpen.io.limits import MAX_CSV_BYTES, check_size
+from realpen.io.limits import check_size
 from realpen.study.design import Design
 from realpen.study.export import KEY_COLUMNS
 from realpen.study.plan import participant_plan
 
 __all__ = ["Trials", "Outcome", "read_trials", "outcomes", "cell_values", "FACTOR_COLUMNS",
-           "RECOGNITION", "LOG_RT"]
+           "RECOGNITION", "LOG_RT", "MAX_TRIALS_BYTES", "CHUNK_ROWS"]
 
 FACTOR_COLUMNS = ("condition", "modality", "pen")
 """The columns that can be within-subject factors, in the order they are nested."""
 RECOGNITION = "recognition"
 LOG_RT = "log_rt"
 _ANALYSED_PHASES = ("experimental", "questionnaire")
+MAX_TRIALS_BYTES = 256 * 1024 * 1024
+"""The largest trials CSV read (bytes): 256 MiB, about 2.5 million answers (study 2's export
+is some 90 bytes an answer: 22,000 participants of its 93 trials; a lab study of 24 is 0.3 MB).
+Read in chunks into compact columns, such a file takes well under 1 GB of memory; a larger
+one is refused with one line before it is read. ``realpen stats simulate`` refuses to write
+one."""
+CHUNK_ROWS = 50_000
+"""Records checked and converted at a time: the text of one chunk is all that is held as
+Python strings."""
+_MAX_STUDY_NAMES = 100  # other studies' names remembered for a message
+_PLAIN_INTEGER = r"-?[0-9]+"
 
 
 @dataclass(frozen=True)
@@ -76,9 +96,11 @@ class Trials:
 
     Attributes:
         frame: one row per answer of the analysed phases (training left out), with the
-            key columns as text except ``trial`` (int), ``rt_ms`` (float, ms), ``correct``
-            (1.0, 0.0 or NaN), ``value`` (the rating as a float, NaN for other answers),
-            ``repetition`` (int, 0 where the file has none) and ``line`` (the CSV line).
+            key columns as text (categorical, sorted categories) except ``trial`` (int),
+            ``rt_ms`` (float, ms), ``correct`` (1.0, 0.0 or NaN), ``value`` (the rating as a
+            float, NaN for other answers), ``repetition`` (int, 0 where the file has none)
+            and ``line`` (the CSV line); ``answer`` is empty for text questions (not
+            analysed), and the file's other columns are not kept.
         training: the training rows, the same columns (counted in the report, not analysed).
         design: the study's design.
         source: the file as given.
@@ -95,41 +117,30 @@ class Trials:
 def read_trials(path: str | os.PathLike, design: Design) -> Trials:
     """Read a trials CSV (``realpen study export``) and keep the rows of ``design``'s study.
 
+    The file is streamed: :data:`CHUNK_ROWS` records at a time are checked and kept in compact
+    columns (text as categories, numbers as arrays), so memory follows the study's rows, not
+    the file's text; a file over :data:`MAX_TRIALS_BYTES` is refused before it is read. A
+    UTF-8 byte-order mark at its start (Excel writes one) is skipped.
+
     Args:
         path: the CSV file.
         design: the study's design; rows whose ``study`` is another are left out (a file may
             hold several studies).
 
     Raises:
-        RealPenError: the file is missing, empty, not a CSV, lacks a key column, holds no row
-            of the study, or holds a rating, ``correct`` or ``rt_ms`` that is not valid; the
-            line names the file, the CSV line, the participant and the question.
+        RealPenError: the file is missing, empty, over :data:`MAX_TRIALS_BYTES`, not a CSV,
+            lacks a key column, holds no row of the study, or holds a rating, ``correct`` or
+            ``rt_ms`` that is not valid (a rating must be a plain whole number: ``3`` or
+            ``-3``, not ``+3``, ``3.0``, ``1e0`` or `` 3``); the line names the file, the CSV
+            line, the participant and the question.
     """
     source = str(path)
     check_readable_file(path)
-    check_size(path, MAX_CSV_BYTES, "CSV files")
-    frame = _read_csv(path, source)
-    missing = [column for column in KEY_COLUMNS if column not in frame.columns]
-    if missing:
-        raise fail(source, f"missing column{'s' if len(missing) > 1 else ''} "
-                           f"{', '.join(missing)} (a trials CSV from `realpen study export` "
-                           f"starts with {', '.join(KEY_COLUMNS)})")
-    studies = sorted(set(frame["study"]))
-    frame = frame[frame["study"] == design.name]
-    if frame.empty:
-        raise fail(source, f"no answers of study '{design.name}'"
-                           + (f" (studies in the file: {', '.join(studies)})" if studies
-                              else " (the file has no rows)"))
-    frame = frame.copy()
-    frame["trial"] = [_whole(source, row, "trial", row.trial) for row in frame.itertuples()]
-    frame["repetition"] = ([_whole(source, row, "repetition", row.repetition or "0")
-                            for row in frame.itertuples()]
-                           if "repetition" in frame.columns else 0)
-    frame["rt_ms"] = [_milliseconds(source, row) for row in frame.itertuples()]
-    frame["correct"] = [_correct(source, row, design) for row in frame.itertuples()]
-    frame["value"] = [_rating(source, row, design) for row in frame.itertuples()]
-    _check_keys(source, frame)
+    check_size(path, MAX_TRIALS_BYTES, "trials CSV files")
+    reader = _ChunkReader(design, source)
+    frame = reader.read(path)
     participants = list(dict.fromkeys(frame["participant"]))
+    _check_keys(source, frame)
     training = frame[frame["phase"] == "training"]
     unknown = frame[~frame["phase"].isin(("training",) + _ANALYSED_PHASES)]
     if not unknown.empty:
@@ -141,40 +152,214 @@ def read_trials(path: str | os.PathLike, design: Design) -> Trials:
                   design=design, source=source, participants=participants)
 
 
-def _read_csv(path: str | os.PathLike, source: str) -> pd.DataFrame:
-    """Every record as text, with ``line``: the file line it starts on (a quoted answer may
-    span lines, so records and lines differ)."""
-    try:
-        with open(path, newline="", encoding="utf-8") as handle:
-            reader = csv.reader(handle)
-            header = next(reader, None)
-            if not header:
-                raise fail(source, "has no header line (a trials CSV from `realpen study export`)")
-            if len(set(header)) != len(header):
-                raise fail(source, "line 1: a column name appears twice")
-            records, lines = [], []
-            start = reader.line_num + 1
-            for record in reader:
-                if record:
-                    if len(record) != len(header):
-                        raise fail(source, f"line {start}: {len(record)} fields, the header has "
-                                           f"{len(header)}")
-                    records.append(record)
-                    lines.append(start)
+class _ChunkReader:
+    """Reads a trials CSV chunk by chunk: every record's fields counted, the study's rows
+    checked and kept as compact columns, the first problem of each kind remembered so that
+    the one reported is the one a reading of the whole file would find first (trial, then
+    repetition, rt_ms, correct, rating; each in file order)."""
+
+    def __init__(self, design: Design, source: str) -> None:
+        self.design = design
+        self.source = source
+        self.studies: set[str] = set()
+        self.chunks: list[pd.DataFrame] = []
+        self.problems: dict[int, str] = {}
+        self.has_repetition = False
+        likert = {q.id: q for q in design.questions if q.type == "likert"}
+        self.likert = likert
+        self.recognition = {q.id for q in design.questions if q.correct == "pen"}
+        self.kept_answers = set(likert) | {q.id for q in design.questions if q.type == "choice"}
+
+    def read(self, path: str | os.PathLike) -> pd.DataFrame:
+        source = self.source
+        try:
+            with open(path, newline="", encoding="utf-8-sig") as handle:
+                reader = csv.reader(handle)
+                header = next(reader, None)
+                if not header:
+                    raise fail(source, "has no header line (a trials CSV from `realpen study "
+                                       "export`)")
+                if len(set(header)) != len(header):
+                    raise fail(source, "line 1: a column name appears twice")
+                missing = [column for column in KEY_COLUMNS if column not in header]
+                if missing:
+                    raise fail(source, f"missing column{'s' if len(missing) > 1 else ''} "
+                                       f"{', '.join(missing)} (a trials CSV from `realpen study "
+                                       f"export` starts with {', '.join(KEY_COLUMNS)})")
+                self.has_repetition = "repetition" in header
+                kept = [*KEY_COLUMNS, *(["repetition"] if self.has_repetition else [])]
+                positions = [header.index(column) for column in kept]
+                study = header.index("study")
+                records: list[list[str]] = []
+                lines: list[int] = []
                 start = reader.line_num + 1
-    except UnicodeDecodeError:
-        raise fail(source, "is not UTF-8 text (a trials CSV from `realpen study export`)") from None
-    except csv.Error as error:
-        raise fail(source, f"is not a readable CSV file ({error})") from None
-    frame = pd.DataFrame(records, columns=header, dtype=str)
-    frame["line"] = lines
-    return frame
+                for record in reader:
+                    if record:
+                        if len(record) != len(header):
+                            raise fail(source, f"line {start}: {len(record)} fields, the "
+                                               f"header has {len(header)}")
+                        name = record[study]
+                        if name == self.design.name:
+                            records.append([record[i] for i in positions])
+                            lines.append(start)
+                            if len(records) >= CHUNK_ROWS:
+                                self._add(records, lines, kept)
+                                records, lines = [], []
+                        elif len(self.studies) < _MAX_STUDY_NAMES:
+                            self.studies.add(name)
+                    start = reader.line_num + 1
+                if records:
+                    self._add(records, lines, kept)
+        except UnicodeDecodeError:
+            raise fail(source, "is not UTF-8 text (a trials CSV from `realpen study export`)") \
+                from None
+        except csv.Error as error:
+            raise fail(source, f"is not a readable CSV file ({error})") from None
+        if not self.chunks:
+            studies = sorted(self.studies)
+            raise fail(source, f"no answers of study '{self.design.name}'"
+                               + (f" (studies in the file: {', '.join(studies)})" if studies
+                                  else " (the file has no rows)"))
+        if self.problems:
+            raise RealPenError(self.problems[min(self.problems)])
+        return _joined(self.chunks)
+
+    def _problem(self, kind: int, message: str) -> None:
+        self.problems.setdefault(kind, message)
+
+    def _add(self, records: list[list[str]], lines: list[int], kept: list[str]) -> None:
+        """Check one chunk of the study's records and keep it as compact columns."""
+        frame = pd.DataFrame(records, columns=kept, dtype=object)
+        frame["line"] = np.asarray(lines, dtype=np.int64)
+        trial = self._whole(frame, "trial", frame["trial"], 0)
+        repetition = (self._whole(frame, "repetition", frame["repetition"].replace("", "0"), 1)
+                      if self.has_repetition else np.zeros(len(frame), dtype=np.int64))
+        shown = pd.Series(trial, index=frame.index)
+        rt_ms = self._milliseconds(frame, shown)
+        correct = self._correct(frame, shown)
+        value = self._ratings(frame, shown)
+        answers = frame["answer"].where(frame["question"].isin(self.kept_answers), "")
+        compact = {column: pd.Categorical(frame[column].to_numpy(dtype=object))
+                   for column in KEY_COLUMNS if column not in ("trial", "rt_ms", "correct",
+                                                                "answer")}
+        compact.update(answer=pd.Categorical(answers.to_numpy(dtype=object)), trial=trial,
+                       rt_ms=rt_ms, correct=correct, value=value, repetition=repetition,
+                       line=frame["line"].to_numpy())
+        self.chunks.append(pd.DataFrame(compact)[[*KEY_COLUMNS, "repetition", "line", "value"]])
+
+    def _first(self, frame: pd.DataFrame, bad: np.ndarray) -> pd.Series:
+        return frame.iloc[int(np.argmax(bad))]
+
+    def _whole(self, frame: pd.DataFrame, column: str, texts: pd.Series, kind: int) -> np.ndarray:
+        """Whole numbers as Python's int() reads them, each distinct text parsed once."""
+        parsed = {}
+        for text in pd.unique(texts):
+            try:
+                parsed[text] = int(text)
+            except ValueError:
+                parsed[text] = None
+        numbers = texts.map(parsed)
+        bad = numbers.isna().to_numpy()
+        if bad.any():
+            row = self._first(frame, bad)
+            self._problem(kind, f"{self.source}: line {row.line}: {column} "
+                                f"'{texts.iloc[int(np.argmax(bad))]}' is not a whole number")
+            numbers = numbers.fillna(0)
+        return numbers.to_numpy(dtype=np.int64)
+
+    def _where(self, row: pd.Series, trial: object) -> str:
+        return f"{self.source}: line {row.line}: participant {row.participant}, trial {trial}"
+
+    def _milliseconds(self, frame: pd.DataFrame, trial: pd.Series) -> np.ndarray:
+        def number(text: str) -> float:
+            try:
+                return float(text)
+            except ValueError:
+                return math.nan
+
+        values = np.fromiter((number(text) for text in frame["rt_ms"]), dtype=float,
+                             count=len(frame))
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.isfinite(values) & (values >= 0))
+        if bad.any():
+            at = int(np.argmax(bad))
+            row = frame.iloc[at]
+            self._problem(2, f"{self._where(row, trial.iloc[at])}: rt_ms '{row.rt_ms}' is not "
+                             f"a number of milliseconds >= 0")
+        return values
+
+    def _correct(self, frame: pd.DataFrame, trial: pd.Series) -> np.ndarray:
+        judged = (frame["question"].isin(self.recognition)
+                  & frame["phase"].isin(_ANALYSED_PHASES)).to_numpy()
+        text = frame["correct"]
+        free_ok = text.isin(("1", "0", "")).to_numpy()
+        right = np.where(frame["answer"].to_numpy() == frame["pen"].to_numpy(), "1", "0")
+        judged_ok = text.to_numpy() == right
+        bad = np.where(judged, ~judged_ok, ~free_ok)
+        if bad.any():
+            at = int(np.argmax(bad))
+            row = frame.iloc[at]
+            where = self._where(row, trial.iloc[at])
+            if judged[at]:
+                self._problem(3, f"{where}: correct '{row.correct}' disagrees with the answer "
+                                 f"'{row.answer}' to {row.question} for pen '{row.pen}' "
+                                 f"(expected {right[at]})")
+            else:
+                self._problem(3, f"{where}: correct '{row.correct}' must be 1, 0 or empty")
+        values = np.full(len(frame), math.nan)
+        values[text.to_numpy() == "1"] = 1.0
+        values[text.to_numpy() == "0"] = 0.0
+        values[judged] = (right[judged] == "1").astype(float)
+        return values
+
+    def _ratings(self, frame: pd.DataFrame, trial: pd.Series) -> np.ndarray:
+        """Likert answers: plain whole numbers on the question's scale (NaN elsewhere)."""
+        values = np.full(len(frame), math.nan)
+        questions = frame["question"]
+        first: tuple[int, str] | None = None  # the chunk's first bad rating, over questions
+        for question_id, question in self.likert.items():
+            rows = np.flatnonzero((questions == question_id).to_numpy())
+            if not len(rows):
+                continue
+            answers = frame["answer"].iloc[rows]
+            empty = (answers == "").to_numpy() & (not question.required)
+            plain = answers.str.fullmatch(_PLAIN_INTEGER).fillna(False).to_numpy(dtype=bool)
+            numbers = pd.to_numeric(answers.where(plain, "0")).to_numpy(dtype=float)
+            inside = plain & (numbers >= 1) & (numbers <= question.points)
+            bad = ~inside & ~empty
+            if bad.any() and (first is None or rows[int(np.argmax(bad))] < first[0]):
+                at = rows[int(np.argmax(bad))]
+                row = frame.iloc[at]
+                why = "" if plain[int(np.argmax(bad))] else " (a plain whole number)"
+                first = (at, f"{self._where(row, trial.iloc[at])}: {row.question} answer "
+                             f"'{row.answer}' is not a rating from 1 to {question.points}{why}")
+            values[rows[inside]] = numbers[inside]
+        if first is not None:
+            self._problem(4, first[1])
+        return values
+
+
+def _joined(chunks: list[pd.DataFrame]) -> pd.DataFrame:
+    """The chunks as one frame, each text column one categorical (sorted categories, so its
+    order is the text's)."""
+    if len(chunks) == 1:
+        frame = chunks[0]
+        parts = {column: [frame[column]] for column in frame.columns}
+    else:
+        parts = {column: [chunk[column] for chunk in chunks] for column in chunks[0].columns}
+    joined = {}
+    for column, pieces in parts.items():
+        if isinstance(pieces[0].dtype, pd.CategoricalDtype):
+            joined[column] = union_categoricals(pieces, sort_categories=True)
+        else:
+            joined[column] = np.concatenate([piece.to_numpy() for piece in pieces])
+    return pd.DataFrame(joined)
 
 
 def _check_keys(source: str, frame: pd.DataFrame) -> None:
     """One session per participant, one answer per trial and question: merged exports must not
     pool two people under one code, nor count an answer twice."""
-    sessions = frame.groupby("participant", sort=False)["session"].unique()
+    sessions = frame.groupby("participant", sort=False, observed=True)["session"].unique()
     for participant, found in sessions.items():
         if len(found) > 1:
             raise fail(source, f"participant {participant} has answers in {len(found)} sessions "
@@ -193,59 +378,6 @@ def _check_keys(source: str, frame: pd.DataFrame) -> None:
 
 def _where(source: str, row) -> str:
     return f"{source}: line {row.line}: participant {row.participant}, trial {row.trial}"
-
-
-def _whole(source: str, row, column: str, text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise fail(f"{source}: line {row.line}", f"{column} '{text}' is not a whole "
-                                                  f"number") from None
-
-
-def _milliseconds(source: str, row) -> float:
-    try:
-        value = float(row.rt_ms)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value) or value < 0:
-        raise fail(_where(source, row), f"rt_ms '{row.rt_ms}' is not a number of "
-                                        f"milliseconds >= 0")
-    return value
-
-
-def _correct(source: str, row, design: Design) -> float:
-    question = _question(design, row.question)
-    if question is None or question.correct != "pen" or row.phase not in _ANALYSED_PHASES:
-        if row.correct in ("1", "0", ""):
-            return float(row.correct) if row.correct else math.nan
-        raise fail(_where(source, row), f"correct '{row.correct}' must be 1, 0 or empty")
-    right = "1" if row.answer == row.pen else "0"
-    if row.correct != right:
-        raise fail(_where(source, row), f"correct '{row.correct}' disagrees with the answer "
-                                        f"'{row.answer}' to {row.question} for pen '{row.pen}' "
-                                        f"(expected {right})")
-    return float(right)
-
-
-def _rating(source: str, row, design: Design) -> float:
-    question = _question(design, row.question)
-    if question is None or question.type != "likert":
-        return math.nan
-    if row.answer == "" and not question.required:
-        return math.nan
-    try:
-        value = float(row.answer)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value) or value != int(value) or not 1 <= value <= question.points:
-        raise fail(_where(source, row), f"{row.question} answer '{row.answer}' is not a rating "
-                                        f"from 1 to {question.points}")
-    return value
-
-
-def _question(design: Design, question_id: str):
-    return next((question for question in design.questions if question.id == question_id), None)
 
 
 def outcomes(design: Design) -> list[Outcome]:
@@ -337,11 +469,19 @@ def cell_values(trials: Trials, outcome: Outcome) -> tuple[pd.DataFrame, dict[st
                .rename(columns={"mean": "value", "size": "trials"}))
     incomplete: dict[str, str] = {}
     keep: list[str] = []
+    # Which participants have each planned cell: one pass over the grouped rows, not one
+    # search of them per participant.
+    if factors:
+        texts = grouped[factors].astype(str)
+        keys = pd.Series(list(zip(*(texts[name] for name in factors))), index=grouped.index)
+    else:
+        keys = pd.Series([()] * len(grouped), index=grouped.index, dtype=object)
+    having: dict[tuple[str, ...], set[str]] = {cell: set() for cell in outcome.cells}
+    for participant, key in zip(grouped["participant"].astype(str), keys):
+        if key in having:
+            having[key].add(participant)
     for participant in trials.participants:
-        have = grouped[grouped["participant"] == participant]
-        present = {tuple(str(v) for v in cell) for cell in have[factors].itertuples(index=False)} \
-            if factors else ({()} if len(have) else set())
-        missing = [cell for cell in outcome.cells if cell not in present]
+        missing = [cell for cell in outcome.cells if participant not in having[cell]]
         if missing:
             where = ", ".join(f"{name} {level}" for name, level in zip(factors, missing[0]))
             what = {"likert": f"no answer to {outcome.question}",
@@ -355,10 +495,9 @@ def cell_values(trials: Trials, outcome: Outcome) -> tuple[pd.DataFrame, dict[st
     values = grouped[grouped["participant"].isin(keep)]
     planned = set(outcome.cells)
     if factors:
-        inside = [tuple(str(v) for v in cell) in planned
-                  for cell in values[factors].itertuples(index=False)]
-        values = values[inside].copy()
+        values = values[[key in planned for key in keys[values.index]]].copy()
         for name in factors:  # design order, which the tests and figures keep
-            values[name] = pd.Categorical(values[name], categories=list(outcome.levels[name]))
+            values[name] = pd.Categorical(values[name].astype(str),
+                                          categories=list(outcome.levels[name]))
     return values.reset_index(drop=True), incomplete
 

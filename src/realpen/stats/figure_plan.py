@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from realpen.display.charts import factor_label
+from realpen.display.charts import MAX_VECTOR_PARTICIPANTS, factor_label
 from realpen.display.images import DPI, FORMATS, figure_images, image_kinds
 from realpen.errors import ParameterError
 from realpen.io.files import write_files
@@ -35,7 +35,15 @@ from realpen.stats.figure_data import (
     outcome_names,
     participant_table,
 )
-from realpen.stats.figures import figure7, figure10, figure11, figure12, means_figure, participants_figure
+from realpen.stats.figures import (
+    MAX_PARTICIPANT_PANELS,
+    figure7,
+    figure10,
+    figure11,
+    figure12,
+    means_figure,
+    participants_figure,
+)
 from realpen.stats.power_plot import has_power_figure, power_figure, split_power
 
 __all__ = ["study_figure_names", "figure_caption", "figure_captions", "save_study_figures"]
@@ -104,9 +112,35 @@ def _ci_words(cells: pd.DataFrame, outcomes: Iterable[str]) -> str:
     return f"95 % CI ({', '.join(found)})" if found else "95 % CI"
 
 
+def _dots_words(count: int) -> str:
+    """What a caption adds when ``count`` participants' dots are drawn as one faint image
+    layer (above :data:`realpen.display.charts.MAX_VECTOR_PARTICIPANTS`); else nothing."""
+    if count <= MAX_VECTOR_PARTICIPANTS:
+        return ""
+    return (f" The {count:,} participants' dots are one rasterised layer, each drawn faint: "
+            "the darker the colour, the more of them there.")
+
+
+def _lines_words(count: int, shift: str) -> str:
+    """A Likert figure's words for its grey participant lines: one line each, shifted, up to
+    :data:`realpen.display.charts.MAX_VECTOR_PARTICIPANTS` participants; aggregated above."""
+    if count <= MAX_VECTOR_PARTICIPANTS:
+        return f"grey lines: each participant's answers, {shift}."
+    return (f"grey: the {count:,} participants' answers, aggregated: each step from one "
+            "answer to the next level's is one line, as wide as how many participants took it "
+            "(the widest: the most in its panel), each answer one dot, as large as how many "
+            "gave it.")
+
+
 def _figure_plan(analysis) -> list[tuple[str, object, str]]:
     """``(name, draw, caption)`` of every figure that applies; ``draw()`` returns the Figure."""
     plan: list[tuple[str, object, str]] = []
+    participants = participant_table(analysis)
+
+    def people(outcomes: Iterable[str]) -> int:
+        return participants.loc[participants["outcome"].isin(list(outcomes)),
+                                "participant"].nunique()
+
     cells = analysis.cells
     has_cells = isinstance(cells, pd.DataFrame) and len(cells) > 0
     shift = f"shifted by at most ±{LIKERT_JITTER:g} points so that tied answers stay visible"
@@ -120,7 +154,7 @@ def _figure_plan(analysis) -> list[tuple[str, object, str]]:
             plan.append(("figure7", lambda: figure7(analysis),
                          f"Figure 7. {', '.join(outcome_label(analysis, o) for o in likert)}: "
                          f"mean rating per condition with its {_ci_words(cells, likert)}; "
-                         f"grey lines: each participant's answers, {shift}."))
+                         + _lines_words(people(likert), shift)))
     if analysis.confusion is not None and len(analysis.confusion):
         plan.append(("figure10" if paper else "confusion", lambda: figure10(analysis),
                      ("Figure 10. " if paper else "")
@@ -135,7 +169,7 @@ def _figure_plan(analysis) -> list[tuple[str, object, str]]:
                          + "Response time (ms) per modality × pen: the geometric mean "
                          "over participants (exp of the mean of each participant's mean log "
                          f"RT) with its {_ci_words(cells, [RT_OUTCOME])}, exp-transformed; "
-                         "faint dots: each participant."))
+                         "faint dots: each participant." + _dots_words(people([RT_OUTCOME]))))
         items = outcome_names(cells, factor="modality", unit=LIKERT_UNIT, known=QUESTIONNAIRE)
         if items and paper:
             single = [item for item in items if
@@ -144,24 +178,37 @@ def _figure_plan(analysis) -> list[tuple[str, object, str]]:
             only = f" Asked in one modality only: {', '.join(single)}." if single else ""
             plan.append(("figure12", lambda: figure12(analysis),
                          f"Figure 12. Questionnaire items per modality: mean rating with its "
-                         f"{_ci_words(cells, items)}; grey lines: each participant's answers, "
-                         f"{shift}.{only}"))
+                         f"{_ci_words(cells, items)}; {_lines_words(people(items), shift)}"
+                         f"{only}"))
         if analysis.design not in ("study1", "study2"):
             for outcome in outcome_names(cells):
                 plan.append((f"means-{_file_stem(outcome)}",
                              lambda outcome=outcome: means_figure(analysis, outcome),
                              f"{outcome_label(analysis, outcome)}: mean per level of each "
                              f"factor with its {_ci_words(cells, [outcome])}; dots: each "
-                             "participant."))
-    participants = participant_table(analysis)
+                             "participant." + _dots_words(people([outcome]))))
     known = QUESTIONNAIRE if analysis.design == "study2" else ()
     for outcome in outcome_names(participants, known=("recognition", RT_OUTCOME, *known)):
         factor = main_factor(participants, outcome)
+        count = people([outcome])
+        levels = participants.loc[(participants["outcome"] == outcome)
+                                  & (participants["factor"] == factor), "level"].unique()
+        if count > MAX_PARTICIPANT_PANELS and (len(levels) > 1 or ":" in factor):
+            caption = (f"{outcome_label(analysis, outcome)}, participant by participant: each "
+                       f"row is one participant's own values across {factor_label(factor)} "
+                       f"(exact, as colour), the {count} rows sorted by their mean; above: "
+                       "the group mean of each column.")
+        elif count > MAX_PARTICIPANT_PANELS:
+            caption = (f"{outcome_label(analysis, outcome)}, participant by participant: "
+                       "each dot is one "
+                       "participant's own value (exact), side by side, drawn as one rasterised layer; "
+                       "dashed: the group mean.")
+        else:
+            caption = (f"{outcome_label(analysis, outcome)}, participant by participant: each "
+                       f"panel is one participant's own values across {factor_label(factor)} "
+                       "(exact, not shifted); dashed: the group mean.")
         plan.append((f"participants-{_file_stem(outcome)}",
-                     lambda outcome=outcome: participants_figure(analysis, outcome),
-                     f"{outcome_label(analysis, outcome)}, participant by participant: each "
-                     f"panel is one participant's own values across {factor_label(factor)} "
-                     "(exact, not shifted); dashed: the group mean."))
+                     lambda outcome=outcome: participants_figure(analysis, outcome), caption))
     if has_power_figure(analysis.power):
         curves, detectable = split_power(analysis.power)
         parts = []

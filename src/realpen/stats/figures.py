@@ -34,6 +34,7 @@ from matplotlib.figure import Figure
 from realpen.display.axes import axes_list
 from realpen.display.charts import (
     MARKERS,
+    MAX_VECTOR_PARTICIPANTS,
     PALETTE,
     PARTICIPANT_COLOUR,
     cell_outline,
@@ -67,9 +68,15 @@ from realpen.stats.figure_data import (
     require_table,
 )
 
-__all__ = ["figure7", "figure10", "figure11", "figure12", "participants_figure", "means_figure"]
+__all__ = ["figure7", "figure10", "figure11", "figure12", "participants_figure", "means_figure",
+           "MAX_PARTICIPANT_PANELS"]
 
 MAX_COLUMNS = 4  # participant panels per row: wider would shrink on a page
+MAX_PARTICIPANT_PANELS = 48
+"""The most participants :func:`participants_figure` draws one panel each (12 rows of 4). A
+larger study is one heat map, a row per participant: a panel each would take minutes to lay
+out and a page per 48 participants to read. Likewise a single-level factor's participants are
+labelled one by one up to this many."""
 
 
 def figure7(analysis, ax: Axes | Sequence[Axes] | None = None, *,
@@ -330,12 +337,16 @@ def participants_figure(analysis, outcome: str, ax: Sequence[Axes] | None = None
     single level (an item asked in one modality) is one panel instead: every participant's
     value side by side, the group mean dashed.
 
+    Above :data:`MAX_PARTICIPANT_PANELS` participants the panels become one heat map: a row
+    per participant (sorted by their mean over the levels), a column per level, the colour
+    their exact value, the group means written above the columns.
+
     Args:
         analysis: a :class:`realpen.stats.outcome.StudyAnalysis` with ``participants`` rows of
             ``outcome``.
         outcome: the outcome to show (``Q1``, ``recognition`` ...).
-        ax: one Axes per participant (one Axes for a single-level factor); None makes a new
-            figure (not a pyplot one).
+        ax: one Axes per participant (one Axes for a single-level factor or a heat map); None
+            makes a new figure (not a pyplot one).
         factor: the factor across which to draw; None: ``condition`` if present, else the
             main factor with the most levels.
 
@@ -366,7 +377,6 @@ def participants_figure(analysis, outcome: str, ax: Sequence[Axes] | None = None
     people = list(matrix.index)
     if len(levels) == 1 and ":" not in factor:
         return _one_level(analysis, outcome, factor, matrix, unit, ax)
-    axes, own = panels(ax, len(people), columns=MAX_COLUMNS, panel=(2.4, 2.1))
     cells = analysis.cells if isinstance(analysis.cells, pd.DataFrame) else pd.DataFrame()
     means = None
     if {"outcome", "factor", "level", "mean"} <= set(cells.columns):
@@ -376,6 +386,9 @@ def participants_figure(analysis, outcome: str, ax: Sequence[Axes] | None = None
             means = found.drop_duplicates("level").set_index("level")["mean"].reindex(levels)
     if means is None:
         means = matrix.mean(axis=0)
+    if len(people) > MAX_PARTICIPANT_PANELS:
+        return _heat_map(analysis, outcome, factor, matrix, means, unit, ax)
+    axes, own = panels(ax, len(people), columns=MAX_COLUMNS, panel=(2.4, 2.1))
     names = factor.split(":", 1)
     interaction = len(names) == 2
     if interaction:
@@ -441,19 +454,61 @@ def participants_figure(analysis, outcome: str, ax: Sequence[Axes] | None = None
     return figure
 
 
+def _heat_map(analysis, outcome: str, factor: str, matrix: pd.DataFrame, means: pd.Series,
+              unit: str, ax: Axes | None) -> Figure:
+    """Every participant's values as one image: a row each (sorted by their mean), a column
+    per level; the group means written above their columns."""
+    levels = list(matrix.columns)
+    rows = matrix.to_numpy(float)
+    with np.errstate(invalid="ignore"):
+        order = np.argsort(np.nanmean(rows, axis=1), kind="stable")
+    (axis,) = axes_list(ax, 1, (max(5.0, 0.9 * len(levels) + 2.5), 6.0), "ax")
+    finite = rows[np.isfinite(rows)]
+    low, high = (likert_limits(finite) if unit == LIKERT_UNIT else
+                 (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0))
+    image = axis.imshow(rows[order], aspect="auto", interpolation="nearest", cmap="viridis",
+                        vmin=low, vmax=high)
+    tilt = sum(len(str(level)) for level in levels) > 24
+    axis.set_xticks(range(len(levels)), [label_text(level) for level in levels],
+                    rotation=30 if tilt else 0, ha="right" if tilt else "center")
+    axis.set_yticks([0, len(order) - 1], ["lowest mean", "highest mean"])
+    axis.set_xlabel(factor_label(factor))
+    axis.set_ylabel(f"{len(order)} participants, sorted by their mean")
+    top = axis.secondary_xaxis("top")
+    top.set_xticks(range(len(levels)), [f"{value:.3g}" for value in
+                                        means.reindex(levels).to_numpy(float)],
+                   fontsize="small", rotation=30 if tilt else 0)
+    top.set_xlabel("group mean", fontsize="small")
+    bar = axis.figure.colorbar(image, ax=axis, shrink=0.8, pad=0.02)
+    bar.set_label(axis_label(analysis, outcome, unit))
+    if ax is None:
+        axis.figure.suptitle(f"{outcome_label(analysis, outcome)}: each participant (a row) "
+                             f"across {factor_label(factor)}", fontsize="medium")
+    return axis.figure
+
+
 def _one_level(analysis, outcome: str, factor: str, matrix: pd.DataFrame, unit: str,
                ax: Axes | None) -> Figure:
     """Every participant's value of a single-level factor, side by side, with the mean."""
-    (axis,) = axes_list(ax, 1, (max(4.0, 0.45 * len(matrix) + 1.5), 3.4), "ax")
+    labelled = len(matrix) <= MAX_PARTICIPANT_PANELS
+    width = 0.45 * len(matrix) + 1.5 if labelled else 10.0
+    (axis,) = axes_list(ax, 1, (max(4.0, width), 3.4), "ax")
     values = matrix.iloc[:, 0].to_numpy(float)
     x = np.arange(len(values), dtype=float)
     axis.axhline(float(np.nanmean(values)), color=PARTICIPANT_COLOUR, lw=1.2, ls="--",
                  zorder=2, label="group mean")
-    axis.plot(x, values, "o", color=PALETTE[0], ms=6, zorder=3, label="participant")
+    (dots,) = axis.plot(x, values, "o", color=PALETTE[0], ms=6 if labelled else 2, zorder=3,
+                        label="participant")
+    if len(values) > MAX_VECTOR_PARTICIPANTS:
+        dots.set_rasterized(True)  # a shape per participant would make a file of MB
     style_axes(axis)
     people = [label_text(code) for code in matrix.index]
-    axis.set_xticks(x, people, rotation=30 if sum(map(len, people)) > 4 * len(people) else 0,
-                    ha="right" if sum(map(len, people)) > 4 * len(people) else "center")
+    if labelled:
+        axis.set_xticks(x, people, rotation=30 if sum(map(len, people)) > 4 * len(people) else 0,
+                        ha="right" if sum(map(len, people)) > 4 * len(people) else "center")
+    else:  # a few participants named along the axis: a label each would overlap
+        ticks = np.unique(np.linspace(0, len(values) - 1, 6).round().astype(int))
+        axis.set_xticks(ticks, [people[i] for i in ticks], rotation=30, ha="right")
     axis.set_xlim(-0.7, len(values) - 0.3)
     if unit == LIKERT_UNIT:
         axis.set_ylim(*likert_limits(values))

@@ -99,13 +99,20 @@ def mean_ci(values: object, *, confidence: float = 0.95, method: str = "t", n_bo
     return mean, low, high
 
 
+_BOOTSTRAP_VALUES = 2**22
+
+
 def _bootstrap(array: np.ndarray, level: float, n_boot: int, seed: int, kind: str) -> tuple[float, float]:
     with warnings.catch_warnings():
         # A degenerate BCa gives NaN with a warning; the caller falls back to the percentile.
         warnings.simplefilter("ignore", scipy.stats.DegenerateDataWarning)
         warnings.simplefilter("ignore", RuntimeWarning)
+        # Batches of about 4 M values: the resamples (n_boot × n) and BCa's jackknife (n × n)
+        # would otherwise take gigabytes for thousands of values. The draws are one stream,
+        # so the batch changes no number.
         result = scipy.stats.bootstrap((array,), np.mean, n_resamples=n_boot, confidence_level=level,
-                                       method=kind, vectorized=True, rng=np.random.default_rng(seed))
+                                       method=kind, vectorized=True, rng=np.random.default_rng(seed),
+                                       batch=max(1, _BOOTSTRAP_VALUES // array.size))
     interval = result.confidence_interval
     return float(interval.low), float(interval.high)
 

@@ -538,9 +538,25 @@ def report_power(participants: int, design: Design, *, sims: int = 200, seed: in
                  progress: Callable[[int, int], object] | None = None) -> pd.DataFrame:
     """The smallest effects a study of ``participants`` could detect with 80 % power
     (:func:`minimum_detectable_effect` under the default :class:`ResponseModel`), for the
-    report of a finished study."""
+    report of a finished study.
+
+    A study of more than :data:`realpen.study.plan.MAX_PARTICIPANTS` participants (which a
+    trials CSV may hold) is not simulated: each outcome's row says so in ``note``, with NaN
+    effect and power (at that size every main test detects far smaller effects than a lab
+    study's, and the simulation would take minutes)."""
     if progress is not None:
         progress(0, 1)
+    if isinstance(participants, (int, np.integer)) and participants > MAX_PARTICIPANTS:
+        _, outcomes = _prepare(design, None, seed, sims)
+        note = (f"not simulated: {participants:,} participants, more than the "
+                f"{MAX_PARTICIPANTS:,} the power simulation covers")
+        rows = [(outcome.name, _TESTS[outcome.kind], int(participants),
+                 "effect" if outcome.kind == "likert" else "rate_spread", math.nan, math.nan,
+                 note) for outcome in outcomes]
+        found = pd.DataFrame(rows, columns=list(MDE_COLUMNS))
+        if progress is not None:
+            progress(1, 1)
+        return found
     found = minimum_detectable_effect(design, participants, sims=sims, seed=seed)
     if progress is not None:
         progress(1, 1)

@@ -58,7 +58,8 @@ from realpen.study.plan import MAX_PARTICIPANTS, PlannedTrial, participant_plan
 
 __all__ = ["ResponseModel", "simulated_trials", "simulate_store", "participant_code",
            "main_factor", "level_positions", "level_of", "check_inputs", "likert_cuts", "pen_rate",
-           "PAPER_RATES", "SIMULATED_COLUMNS", "write_simulated"]
+           "PAPER_RATES", "SIMULATED_COLUMNS", "write_simulated", "write_simulated_trials",
+           "simulated_bytes", "check_simulated_size"]
 
 PAPER_RATES = {"tactile": 0.4305, "auditory": 0.5096, "audio-tactile": 0.6296}
 """The recognition rates the paper reported per modality (study 2), as proportions."""
@@ -301,22 +302,80 @@ def simulated_trials(design: Design, participants: int, *, model: ResponseModel 
     check_inputs(design, participants, model, seed)
     if not isinstance(site, str):
         raise ParameterError("site", f"must be text, got {site!r}")
+    return pd.concat([_participant_frame(design, index, int(participants), model, int(seed), site)
+                      for index in range(int(participants))], ignore_index=True)
+
+
+def _participant_frame(design: Design, index: int, participants: int, model: ResponseModel,
+                       seed: int, site: str) -> pd.DataFrame:
+    """Participant ``index``'s rows of :func:`simulated_trials`."""
+    code = participant_code(index + 1, participants)
     rows = []
-    for index in range(int(participants)):
-        code = participant_code(index + 1, int(participants))
-        for trial, given, rt_ms in _participant_answers(design, index, model, int(seed)):
-            for question_id in trial.questions:
-                value = given[question_id]
-                correct = ""
-                if design.question(question_id).correct == "pen":
-                    correct = "1" if value == trial.pen else "0"
-                rows.append((design.name, code, index + 1, trial.block, trial.n, trial.phase,
-                             trial.condition, trial.modality, trial.pen, question_id,
-                             "" if value is None else str(value), correct, rt_ms, site,
-                             trial.repetition, trial.ink))
+    for trial, given, rt_ms in _participant_answers(design, index, model, seed):
+        for question_id in trial.questions:
+            value = given[question_id]
+            correct = ""
+            if design.question(question_id).correct == "pen":
+                correct = "1" if value == trial.pen else "0"
+            rows.append((design.name, code, index + 1, trial.block, trial.n, trial.phase,
+                         trial.condition, trial.modality, trial.pen, question_id,
+                         "" if value is None else str(value), correct, rt_ms, site,
+                         trial.repetition, trial.ink))
     frame = pd.DataFrame(rows, columns=list(SIMULATED_COLUMNS))
     return frame.astype({"session": "int64", "trial": "int64", "repetition": "int64",
                          "rt_ms": "float64"})
+
+
+_EXPORT_EXTRA_BYTES = 80
+"""What a store's export adds to each simulated row (bytes): the start and answer times and
+the participant's details (``realpen.study.export``)."""
+
+
+def simulated_bytes(design: Design, participants: int, *, model: ResponseModel | None = None,
+                    seed: int = 0, site: str = "simulated", store: bool = False) -> int:
+    """The size (bytes) of the trials CSV that simulating ``participants`` would write,
+    estimated before simulating them: the header and the first participant's rows, written as
+    :func:`write_simulated` writes them, times the participants (every participant answers the
+    same planned trials; only the widths of answers and times differ, by a few bytes).
+
+    Args:
+        design, participants, model, seed, site: as :func:`simulated_trials`.
+        store: the file is a store's export (``simulate --store``), whose rows also carry
+            times and the participant's details (:data:`_EXPORT_EXTRA_BYTES` more a row).
+    """
+    model = ResponseModel() if model is None else model
+    check_inputs(design, participants, model, seed)
+    first = _participant_frame(design, 0, int(participants), model, int(seed), site)
+    text = first.to_csv(index=False, float_format="%.3f", lineterminator="\n")
+    header = text.index("\n") + 1
+    per_participant = len(text.encode("utf-8")) - header
+    if store:
+        per_participant += _EXPORT_EXTRA_BYTES * len(first)
+    return header + per_participant * int(participants)
+
+
+def check_simulated_size(design: Design, participants: int, target: object, *,
+                         model: ResponseModel | None = None, seed: int = 0,
+                         store: bool = False) -> int:
+    """Refuse, before anything is simulated, a simulation whose trials CSV ``realpen stats``
+    would refuse (over :data:`realpen.stats.data.MAX_TRIALS_BYTES`).
+
+    Returns:
+        The estimated size (bytes, :func:`simulated_bytes`).
+
+    Raises:
+        RealPenError: one line naming ``target``, the estimate and the limit.
+    """
+    from realpen.stats.data import MAX_TRIALS_BYTES
+
+    size = simulated_bytes(design, participants, model=model, seed=seed, store=store)
+    if size > MAX_TRIALS_BYTES:
+        most = max(1, int(participants) * MAX_TRIALS_BYTES // size)
+        raise fail(target, f"would be about {size:,} bytes ({int(participants):,} simulated "
+                           f"participants of {design.name}); trials CSV files are limited to "
+                           f"{MAX_TRIALS_BYTES:,}, which `realpen stats` reads: simulate at "
+                           f"most about {most:,}")
+    return size
 
 
 def simulate_store(design: Design, participants: int, store: str | os.PathLike, *,
@@ -346,10 +405,13 @@ def simulate_store(design: Design, participants: int, store: str | os.PathLike, 
     Raises:
         ParameterError: a bad argument.
         RealPenError: one line naming the store: it cannot be opened, it already holds one of
-            these participants of this design, or the service refused an answer.
+            these participants of this design, the service refused an answer, or the store
+            failed part way (:func:`realpen.study.db.store_error`: a full disk says so). A
+            store this call made is then removed, so a failure leaves no half-simulated
+            store behind (one that existed keeps the sessions committed before).
     """
     from realpen.study import sessions as service
-    from realpen.study.db import hide_password, open_database
+    from realpen.study.db import STORE_ERRORS, hide_password, open_database, store_error
 
     model = ResponseModel() if model is None else model
     check_inputs(design, participants, model, seed)
@@ -359,11 +421,6 @@ def simulate_store(design: Design, participants: int, store: str | os.PathLike, 
     shown = hide_password(store)
     cache = service.DesignCache()
     stored = 0
-    try:
-        _check_no_sessions(database, design, shown)
-    except BaseException:
-        database.close()
-        raise
 
     def run(operation, *args):
         # One transaction per operation, committed before the next: as the live routes do.
@@ -371,6 +428,7 @@ def simulate_store(design: Design, participants: int, store: str | os.PathLike, 
             return operation(conn, *args)
 
     try:
+        _check_no_sessions(database, design, shown)
         for index in range(int(participants)):
             code = participant_code(index + 1, int(participants))
             request = service.SessionRequest(code, site, {}, True, index)
@@ -393,8 +451,15 @@ def simulate_store(design: Design, participants: int, store: str | os.PathLike, 
                     raise fail(shown, f"participant {code}, trial {trial.n}: "
                                       f"{error.detail}") from None
                 stored += len(trial.questions)
-    finally:
+    except STORE_ERRORS as error:  # a full disk, a lost server: one line, as serve says it
         database.close()
+        database.remove_files()
+        raise store_error(store, error) from None
+    except BaseException:
+        database.close()
+        database.remove_files()
+        raise
+    database.close()
     return stored
 
 
@@ -421,3 +486,37 @@ def write_simulated(frame: pd.DataFrame, target: str | os.PathLike) -> None:
 
     with atomic_path(target) as temporary:
         frame.to_csv(temporary, index=False, float_format="%.3f", lineterminator="\n")
+
+
+def write_simulated_trials(design: Design, participants: int, target: str | os.PathLike, *,
+                           model: ResponseModel | None = None, seed: int = 0,
+                           site: str = "simulated") -> None:
+    """Simulate and write participants one at a time: the file :func:`write_simulated` writes
+    of :func:`simulated_trials`, byte for byte, holding one participant's rows in memory.
+
+    Refused first, writing nothing, when the file would exceed
+    :data:`realpen.stats.data.MAX_TRIALS_BYTES` (:func:`check_simulated_size`); the written
+    size is checked again as it grows (an estimate is an estimate).
+
+    Raises:
+        ParameterError: a bad argument.
+        RealPenError: one line naming ``target``: too large, or it cannot be written.
+    """
+    from realpen.io.files import atomic_path
+    from realpen.stats.data import MAX_TRIALS_BYTES
+
+    model = ResponseModel() if model is None else model
+    check_simulated_size(design, participants, target, model=model, seed=seed)
+    if not isinstance(site, str):
+        raise ParameterError("site", f"must be text, got {site!r}")
+    with atomic_path(target) as temporary:
+        with open(temporary, "w", encoding="utf-8", newline="") as handle:
+            for index in range(int(participants)):
+                frame = _participant_frame(design, index, int(participants), model, int(seed),
+                                           site)
+                frame.to_csv(handle, index=False, header=index == 0, float_format="%.3f",
+                             lineterminator="\n")
+                if handle.tell() > MAX_TRIALS_BYTES:
+                    raise fail(target, f"grew past {MAX_TRIALS_BYTES:,} bytes, the most "
+                                       f"`realpen stats` reads, at participant {index + 1:,}: "
+                                       f"simulate fewer")
