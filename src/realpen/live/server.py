@@ -5,11 +5,13 @@ real URL, and a port in use is one clear error. uvicorn handles SIGINT/SIGTERM: 
 accepting, closes the WebSockets (each page's open stroke is ended), then the app's shutdown
 closes the store, whose every stroke was committed as it was drawn.
 
-Slow and idle clients are timed out: a request's head (request line and headers) must arrive
-within :data:`REQUEST_HEAD_TIMEOUT_S`, an idle keep-alive connection is closed after
-:data:`KEEP_ALIVE_S`, and at most :data:`MAX_CONNECTIONS` connections are served at once (more
-get 503). WebSocket keepalive pings allow :data:`WS_PING_TIMEOUT_S` for the answer: a page
-under backpressure answers late, and must not be cut off for it.
+Slow and idle clients are timed out, and request heads bounded, by the server's own protocols
+(:mod:`realpen.live.protocols`): a request's head must arrive within
+:data:`~realpen.live.protocols.REQUEST_HEAD_TIMEOUT_S` and hold at most 64 KiB and 100 header
+lines, an idle keep-alive connection is closed after :data:`KEEP_ALIVE_S`, at most
+:data:`~realpen.live.protocols.MAX_CONNECTIONS` connections are served at once (more get 503),
+and a WebSocket is closed for silence only while the server waits on its client, never while
+the client waits for the store (backpressure).
 """
 
 from __future__ import annotations
@@ -18,58 +20,24 @@ import logging
 import socket
 
 import uvicorn
-from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
 from realpen.errors import ParameterError
 from realpen.live.auth import SecurityHeaders
+from realpen.live.protocols import (
+    MAX_CONNECTIONS,
+    REQUEST_HEAD_TIMEOUT_S,
+    WS_PING_INTERVAL_S,
+    WS_PING_TIMEOUT_S,
+    WS_SPOKEN_SILENCE_S,
+    GuardedHttpProtocol,
+    PatientWebSocketProtocol,
+)
+
+__all__ = ["bind", "lan_address", "url_host", "server_config", "run", "WS_MAX_FRAME",
+           "KEEP_ALIVE_S"]
 
 WS_MAX_FRAME = 1024 * 1024  # frames above this are refused by the protocol layer (close 1009)
-REQUEST_HEAD_TIMEOUT_S = 10.0
 KEEP_ALIVE_S = 5
-MAX_CONNECTIONS = 1000
-WS_PING_INTERVAL_S = 20.0
-WS_PING_TIMEOUT_S = 60.0
-
-
-class TimedHttpProtocol(HttpToolsProtocol):
-    """uvicorn's HTTP protocol with a deadline for each request's head.
-
-    uvicorn times out idle keep-alive connections, but not a connection that never sends a
-    request, or sends half of one's headers and stops (each would hold a connection forever).
-    """
-
-    _head_deadline = None
-    head_timeout_s = REQUEST_HEAD_TIMEOUT_S
-
-    def _arm_head_deadline(self) -> None:
-        self._disarm_head_deadline()
-        self._head_deadline = self.loop.call_later(self.head_timeout_s, self._head_timeout)
-
-    def _disarm_head_deadline(self) -> None:
-        if self._head_deadline is not None:
-            self._head_deadline.cancel()
-            self._head_deadline = None
-
-    def _head_timeout(self) -> None:
-        self._head_deadline = None
-        if not self.transport.is_closing():
-            self.transport.close()
-
-    def connection_made(self, transport) -> None:
-        super().connection_made(transport)
-        self._arm_head_deadline()
-
-    def on_message_begin(self) -> None:
-        super().on_message_begin()
-        self._arm_head_deadline()
-
-    def on_headers_complete(self) -> None:
-        self._disarm_head_deadline()
-        super().on_headers_complete()
-
-    def connection_lost(self, exc) -> None:
-        self._disarm_head_deadline()
-        super().connection_lost(exc)
 
 
 class OneLineFrameErrors(logging.Filter):
@@ -133,18 +101,27 @@ def url_host(host: str) -> str:
 
 
 def server_config(app, log_level: str = "warning",
-                  head_timeout_s: float = REQUEST_HEAD_TIMEOUT_S) -> uvicorn.Config:
-    """The uvicorn configuration of the live server (timeouts and limits above).
+                  head_timeout_s: float = REQUEST_HEAD_TIMEOUT_S,
+                  max_connections: int = MAX_CONNECTIONS,
+                  ws_ping_interval_s: float = WS_PING_INTERVAL_S,
+                  ws_ping_timeout_s: float = WS_PING_TIMEOUT_S,
+                  ws_spoken_silence_s: float = WS_SPOKEN_SILENCE_S) -> uvicorn.Config:
+    """The uvicorn configuration of the live server (timeouts and limits above; the keyword
+    arguments, in seconds and connections, exist for tests that cannot wait the real ones).
 
     The access log is off: in LAN mode every request line would carry the token.
     """
-    http = type("TimedHttpProtocol", (TimedHttpProtocol,), {"head_timeout_s": head_timeout_s})
+    http = type("GuardedHttpProtocol", (GuardedHttpProtocol,),
+                {"head_timeout_s": head_timeout_s, "max_connections": max_connections})
+    ws = type("PatientWebSocketProtocol", (PatientWebSocketProtocol,),
+              {"spoken_silence_s": ws_spoken_silence_s})
     # Outside the app as well: the 500 page of an unexpected error (made by Starlette's
     # outermost middleware) gets the headers too. Headers already set are not repeated.
-    config = uvicorn.Config(SecurityHeaders(app), log_level=log_level, access_log=False, lifespan="on",
-                            http=http, ws_max_size=WS_MAX_FRAME, ws_per_message_deflate=False,
-                            ws_ping_interval=WS_PING_INTERVAL_S, ws_ping_timeout=WS_PING_TIMEOUT_S,
-                            timeout_keep_alive=KEEP_ALIVE_S, limit_concurrency=MAX_CONNECTIONS,
+    config = uvicorn.Config(SecurityHeaders(app), log_level=log_level, access_log=False,
+                            lifespan="on", http=http, ws=ws,
+                            ws_max_size=WS_MAX_FRAME,
+                            ws_per_message_deflate=False, ws_ping_interval=ws_ping_interval_s,
+                            ws_ping_timeout=ws_ping_timeout_s, timeout_keep_alive=KEEP_ALIVE_S,
                             timeout_graceful_shutdown=5)
     # After Config: it configures uvicorn's loggers.
     logging.getLogger("uvicorn.error").addFilter(ONE_LINE_FRAME_ERRORS)
