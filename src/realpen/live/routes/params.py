@@ -17,7 +17,8 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any
 
-from pydantic import BeforeValidator, Field
+from annotated_types import Ge, Le
+from pydantic import BeforeValidator
 from pydantic_core import PydanticCustomError
 
 from realpen.io.limits import MAX_STORED_INT
@@ -73,7 +74,9 @@ def url_int(minimum: int, maximum: int) -> Any:
                                       {"le": maximum})
         return int(significant or "0")
 
-    return Annotated[int, BeforeValidator(digits_only), Field(ge=minimum, le=maximum)]
+    # annotated_types' bounds, not Field(): FastAPI adds its own Field (with the alias) to a
+    # query parameter, and pydantic warns about a second one inside Annotated.
+    return Annotated[int, BeforeValidator(digits_only), Ge(minimum), Le(maximum)]
 
 
 STORED_ID = url_int(1, MAX_STORED_INT)
