@@ -32,18 +32,15 @@ import contextlib
 import json
 import multiprocessing
 import os
-import re
-import select
 import signal
 import socket
 import sqlite3
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 from urllib.parse import urlsplit
 
+from bench_live import start_server  # the same server start as the page benchmark
 from websockets.asyncio.client import connect as async_connect
 from websockets.exceptions import ConnectionClosed
 
@@ -51,24 +48,6 @@ from realpen.profile import resolve_profile
 
 SAMPLES_PER_BATCH = 4
 MESSAGES_PER_STROKE = 100
-
-
-def start_server(folder: Path, lan: bool) -> tuple[subprocess.Popen, str]:
-    env = {**os.environ, "REALPEN_HOME": str(folder / "home"), "PYTHONUNBUFFERED": "1"}
-    command = [sys.executable, "-m", "realpen.cli", "serve", "--port", "0",
-               "--store", str(folder / "flood.sqlite3")]
-    if lan:
-        command.append("--lan")
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                               text=True, env=env)
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and process.poll() is None:
-        if select.select([process.stdout], [], [], 0.2)[0]:
-            match = re.search(r"RealPen live: (http://\S+)", process.stdout.readline())
-            if match:
-                return process, match.group(1)
-    process.kill()
-    raise SystemExit(f"realpen serve did not start: {process.stdout.read()}")
 
 
 def client_messages(client: int, count: int, version: str) -> tuple[list[str], int]:
@@ -293,11 +272,11 @@ def main() -> None:
         spinner.start()
     version = resolve_profile("pencil").version
     with tempfile.TemporaryDirectory() as folder:
-        process, url = start_server(Path(folder), args.lan)
+        process, url = start_server(Path(folder), *(["--lan"] if args.lan else []))
         query = urlsplit(url).query
         ws_url = url.split("?")[0].replace("http://", "ws://") + "ws" + (f"?{query}" if query
                                                                         else "")
-        store = Path(folder) / "flood.sqlite3"
+        store = Path(folder) / "bench.sqlite3"
         try:
             if args.clients and args.messages:
                 outcome = flood(ws_url, args.clients, args.messages, version,

@@ -70,10 +70,12 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
                  "--autoplay-policy=no-user-gesture-required"]
 
 
-def start_server(folder: Path) -> tuple[subprocess.Popen, str]:
+def start_server(folder: Path, *options: str) -> tuple[subprocess.Popen, str]:
+    """``realpen serve`` on a free port with the store ``folder/bench.sqlite3`` (and
+    ``options``); returns the process and the URL it printed."""
     env = {**os.environ, "REALPEN_HOME": str(folder / "home"), "PYTHONUNBUFFERED": "1"}
     process = subprocess.Popen([sys.executable, "-m", "realpen.cli", "serve", "--port", "0",
-                                "--store", str(folder / "bench.sqlite3")],
+                                "--store", str(folder / "bench.sqlite3"), *options],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                env=env)
     deadline = time.monotonic() + 30
