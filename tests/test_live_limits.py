@@ -124,13 +124,21 @@ def test_a_client_far_ahead_of_the_store_is_slowed_not_cut(tmp_path):
     assert stored == 2 * (len(frames) - 1)
 
 
-def handshake(port: int) -> socket.socket:
-    sock = socket.create_connection(("127.0.0.1", port))
+def handshake(port: int, small_window: bool = False) -> socket.socket:
+    """A raw WebSocket to the server, its handshake answered (frames are sent after it, as a
+    client must); ``small_window``: a 4 KiB receive buffer, so unread replies back up fast."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    if small_window:  # before connect: the window is agreed then
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", port))
     sock.sendall(f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
                  f"Connection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
                  f"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n".encode())
     sock.settimeout(30)
-    assert sock.recv(4096).startswith(b"HTTP/1.1 101")
+    answer = b""
+    while b"\r\n\r\n" not in answer:  # byte by byte: nothing after the head is taken
+        answer += sock.recv(1)
+    assert answer.startswith(b"HTTP/1.1 101"), answer
     return sock
 
 
@@ -163,15 +171,7 @@ def test_a_websocket_silent_after_its_handshake_is_released_but_an_idle_page_is_
 def test_a_client_that_takes_no_reply_for_the_allowance_is_released(tmp_path):
     with running_server(tmp_path, ws_ping_interval_s=PING_INTERVAL_S,
                         ws_ping_timeout_s=PING_TIMEOUT_S, ws_spoken_silence_s=1.0) as (port, _):
-        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # before connect: a small window
-        sock.connect(("127.0.0.1", port))
-        sock.sendall(f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
-                     f"Connection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
-                     f"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n".encode())
-        answer = b""
-        while b"\r\n\r\n" not in answer:
-            answer += sock.recv(1)
+        sock = handshake(port, small_window=True)
         hello = json.dumps({"type": "hello", "seq": 0, "client": "t"}).encode()
         frame = bytes([0x81, 0x80 | len(hello)]) + b"\0\0\0\0" + hello  # masked, key 0
         outcome: list[BaseException] = []
@@ -213,16 +213,7 @@ def test_a_client_that_stops_reading_its_replies_for_a_while_is_not_cut(tmp_path
     count = 30000
     with running_server(tmp_path, ws_ping_interval_s=PING_INTERVAL_S,
                         ws_ping_timeout_s=PING_TIMEOUT_S) as (port, _):
-        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # before connect: a small window
-        sock.connect(("127.0.0.1", port))
-        sock.sendall(f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
-                     f"Connection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
-                     f"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n".encode())
-        answer = b""
-        while b"\r\n\r\n" not in answer:  # a client sends frames once the handshake is answered
-            answer += sock.recv(1)
-        assert answer.startswith(b"HTTP/1.1 101")
+        sock = handshake(port, small_window=True)
         hello = json.dumps({"type": "hello", "seq": 0, "client": "t"}).encode()
         frame = bytes([0x81, 0x80 | len(hello)]) + b"\0\0\0\0" + hello  # masked, key 0
         sender = threading.Thread(target=sock.sendall, args=(frame * count,), daemon=True)

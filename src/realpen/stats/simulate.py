@@ -340,7 +340,7 @@ def simulated_bytes(design: Design, participants: int, *, model: ResponseModel |
 
     Args:
         design, participants, model, seed, site: as :func:`simulated_trials`.
-        store: the file is a store's export (``simulate --store``), whose rows also carry
+        store: the file is the export of a simulated store, whose rows also carry
             times and the participant's details (:data:`_EXPORT_EXTRA_BYTES` more a row).
     """
     model = ResponseModel() if model is None else model
