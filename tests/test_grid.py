@@ -197,12 +197,28 @@ def test_a_bad_grid_is_one_line_naming_the_bundle(tmp_path, change, expected):
     assert expected in message, message
 
 
-def test_bundled_pens_saved_again_are_byte_identical(tmp_path):
+def _without_digests(document: dict) -> dict:
+    return {**document, "files": {kind: {key: value for key, value in entry.items()
+                                         if key != "sha256"}
+                                  for kind, entry in document["files"].items()}}
+
+
+def test_bundled_pens_saved_again_are_the_same(tmp_path):
+    # The samples are rendered again in floating point and rounded to 16 bits, so another
+    # processor or numpy release may move a sample by one step (and the files' digests with it):
+    # everything else must be as shipped.
     for name in BUNDLED_PENS:
         shipped = load_profile(bundled_dir() / name)
         folder = save_profile(shipped, tmp_path / name)
-        for file in ("profile.json", "tactile.wav", "sound.wav"):
-            assert (folder / file).read_bytes() == (bundled_dir() / name / file).read_bytes()
+        for file in ("tactile.wav", "sound.wav"):
+            saved, saved_rate = sf.read(folder / file, dtype="int16", always_2d=True)
+            bundled, bundled_rate = sf.read(bundled_dir() / name / file, dtype="int16",
+                                            always_2d=True)
+            assert saved_rate == bundled_rate and saved.shape == bundled.shape
+            assert np.max(np.abs(saved.astype(int) - bundled.astype(int))) <= 1
+        saved_document = json.loads((folder / "profile.json").read_text())
+        bundled_document = json.loads((bundled_dir() / name / "profile.json").read_text())
+        assert _without_digests(saved_document) == _without_digests(bundled_document)
         assert load_profile(folder).version == shipped.version and shipped.meta.format == 2
 
 
