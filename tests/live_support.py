@@ -222,3 +222,50 @@ CREATE TABLE IF NOT EXISTS samples (
 CREATE UNIQUE INDEX IF NOT EXISTS strokes_by_page ON strokes (page, page_stroke);
 PRAGMA user_version = 2;
 """
+
+
+@contextlib.contextmanager
+def running_server(tmp_path, store_delay_s: float = 0.0, **limits):
+    """The live app under uvicorn with ``server_config(**limits)``, in a thread of this process,
+    on a free port; yields (port, app)."""
+    import asyncio
+    import concurrent.futures
+    import threading
+
+    import uvicorn
+
+    from realpen.live.app import LiveSettings, create_app
+    from realpen.live.server import bind, server_config
+
+    app = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3"))
+    if store_delay_s:
+        store = app.state.live.store
+        original = store.append
+
+        def slow_append(*args, **kwargs):
+            inner = original(*args, **kwargs)
+            outer: concurrent.futures.Future = concurrent.futures.Future()
+
+            def finish():
+                try:
+                    outer.set_result(inner.result())
+                except BaseException as error:  # noqa: BLE001 - handed to the caller
+                    outer.set_exception(error)
+
+            threading.Timer(store_delay_s, finish).start()
+            return outer
+
+        store.append = slow_append
+    sock = bind("127.0.0.1", 0)
+    server = uvicorn.Server(server_config(app, **limits))
+    thread = threading.Thread(target=lambda: asyncio.run(server.serve(sockets=[sock])))
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not server.started and time.monotonic() < deadline:
+        time.sleep(0.02)
+    try:
+        yield sock.getsockname()[1], app
+    finally:
+        server.should_exit = True
+        thread.join(timeout=30)
+        sock.close()

@@ -9,7 +9,6 @@ every wait is for an event (an answer, a close), with a generous deadline for lo
 from __future__ import annotations
 
 import asyncio
-import concurrent.futures
 import contextlib
 import json
 import socket
@@ -17,7 +16,7 @@ import threading
 import time
 
 import pytest
-from live_support import rows
+from live_support import rows, running_server
 
 pytest.importorskip("fastapi", reason="the live app needs the server dependencies")
 
@@ -36,43 +35,6 @@ from realpen.profile import resolve_profile  # noqa: E402
 
 PING_INTERVAL_S, PING_TIMEOUT_S = 0.3, 0.6
 STORE_DELAY_S = 0.02  # each stored message takes this long: the client gets far ahead
-
-
-@contextlib.contextmanager
-def running_server(tmp_path, store_delay_s: float = 0.0, **limits):
-    """The live app under uvicorn with ``server_config(**limits)``; yields (port, app)."""
-    app = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3"))
-    if store_delay_s:
-        store = app.state.live.store
-        original = store.append
-
-        def slow_append(*args, **kwargs):
-            inner = original(*args, **kwargs)
-            outer: concurrent.futures.Future = concurrent.futures.Future()
-
-            def finish():
-                try:
-                    outer.set_result(inner.result())
-                except BaseException as error:  # noqa: BLE001 - handed to the caller
-                    outer.set_exception(error)
-
-            threading.Timer(store_delay_s, finish).start()
-            return outer
-
-        store.append = slow_append
-    sock = bind("127.0.0.1", 0)
-    server = uvicorn.Server(server_config(app, **limits))
-    thread = threading.Thread(target=lambda: asyncio.run(server.serve(sockets=[sock])))
-    thread.start()
-    deadline = time.monotonic() + 30
-    while not server.started and time.monotonic() < deadline:
-        time.sleep(0.02)
-    try:
-        yield sock.getsockname()[1], app
-    finally:
-        server.should_exit = True
-        thread.join(timeout=30)
-        sock.close()
 
 
 def flood_messages(count: int) -> list[str]:

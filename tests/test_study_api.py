@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import io
 import sqlite3
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import soundfile
-from live_support import WS, study_answers, talk
+from live_support import WS, running_server, study_answers, talk
 
 CONSENT = {"consent": True}
 
@@ -333,17 +335,21 @@ def test_a_store_failure_is_a_503_with_one_line(client, monkeypatch):
     assert "\n" not in reply.json()["detail"]
 
 
-def test_the_documented_python_example_runs_a_whole_session(client, store_path):
-    from pathlib import Path
-
+def test_the_documented_python_example_runs_a_whole_session_on_the_standard_library(
+        tmp_path, monkeypatch):
+    # A Quickstart install has no HTTP client library: the example must not need one.
+    for name in ("httpx", "requests"):
+        monkeypatch.setitem(sys.modules, name, None)
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
     doc = (Path(__file__).resolve().parents[1] / "docs" / "studies.md").read_text()
     code = doc.split("### Driving RealPen from Python")[1].split("```python\n")[1].split("```")[0]
-    assert 'httpx.Client(base_url="http://127.0.0.1:8765")' in code
-    code = code.replace('httpx.Client(base_url="http://127.0.0.1:8765")', "client")
-    exec(compile(code, "docs/studies.md", "exec"), {"client": client})
-    progress = client.get("/api/sessions").json()["sessions"][0]
-    assert (progress["participant"], progress["state"]) == ("P05", "finished")
-    assert count(store_path, "SELECT COUNT(*) FROM trials WHERE answered_at IS NOT NULL") == 93
+    assert 'SERVER = "http://127.0.0.1:8765"' in code
+    with running_server(tmp_path) as (port, _app):
+        code = code.replace('SERVER = "http://127.0.0.1:8765"', f'SERVER = "http://127.0.0.1:{port}"')
+        exec(compile(code, "docs/studies.md", "exec"), {"__name__": "example"})
+    store = tmp_path / "s.sqlite3"
+    assert count(store, "SELECT COUNT(*) FROM trials WHERE answered_at IS NOT NULL") == 93
+    assert count(store, "SELECT COUNT(*) FROM sessions WHERE state = 'finished'") == 1
 
 
 def test_a_shutdown_while_the_database_cannot_answer_still_closes_the_store(tmp_path, monkeypatch):
