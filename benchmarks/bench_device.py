@@ -111,7 +111,7 @@ def stroke_latency(strokes: int, gap_ms: float, folder: Path) -> dict:
             for stroke in range(strokes + 1):  # stroke 0: the warm-up (it uploads the pattern)
                 t = 10.0 + stroke
                 down = send({"type": "pen_down", "stroke": stroke + 1, "t": t, "pen": "pencil",
-                             "profile_version": pencil.version, "modality": "auditory-tactile",
+                             "profile_version": pencil.version, "modality": "audio-tactile",
                              "ink": "visible", "pointer_type": "pen", "px_per_mm": 4.0,
                              "calibrated": True})
                 time.sleep(gap_ms / 1000 if stroke else 0.5)  # the warm-up's upload

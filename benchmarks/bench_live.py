@@ -107,7 +107,7 @@ def measure(url: str, events: int, warmup: int = 50) -> dict:
         _, hello, _ = call({"type": "hello", "seq": 0, "client": "bench_live"})
         session = hello["session"]
         call({"type": "pen_down", "seq": 1, "stroke": 1, "t": 0.0, "pen": "pencil",
-              "profile_version": pencil.version, "modality": "auditory-tactile",
+              "profile_version": pencil.version, "modality": "audio-tactile",
               "px_per_mm": 4.0})
         gain_sent, to_server, gain_rtt, samples_rtt = {}, [], [], []
         for i in range(warmup + events):  # as the page does: a gain, then the samples
@@ -157,7 +157,7 @@ def page_messages(page_no: int, count: int, version: str) -> tuple[list[dict], i
         if position == 0:
             stroke, index = stroke + 1, 0
             messages.append({"type": "pen_down", "stroke": stroke, "t": i * 0.004, "pen": "pencil",
-                             "profile_version": version, "modality": "auditory-tactile",
+                             "profile_version": version, "modality": "audio-tactile",
                              "px_per_mm": 4.0})
         elif position == MESSAGES_PER_STROKE - 1 or i == count - 1:
             messages.append({"type": "pen_up", "stroke": stroke, "t": i * 0.004 + 0.003})

@@ -118,12 +118,18 @@ def test_the_speed_window_matches_the_stroke_renderer():
     assert js_constants(read("pen.js"))["SPEED_WINDOW_MS"] == stroke.SPEED_WINDOW_MS
 
 
-@pytest.mark.parametrize(("module", "name"), [("app.js", "MODALITIES"),
-                                              ("study/participant.js", "LIVE_MODALITIES")])
-def test_the_page_modalities_are_the_live_messages_modalities(module, name):
+def test_the_page_modalities_are_the_live_messages_modalities():
+    """One list on the page (writer.js, which the writing page and the participant screen
+    import), the server's, and the old names both read as today's."""
+    from realpen import defaults
     from realpen.live import messages
 
-    assert tuple(js_constants(read(module))[name]) == tuple(messages.MODALITIES)
+    text = read("writer.js")
+    assert tuple(js_constants(text)["MODALITIES"]) == messages.MODALITIES == defaults.MODALITIES
+    old = re.search(r"^export const OLD_MODALITY_NAMES = (\{.*?\});", text, re.M | re.S)
+    assert old is not None and ast.literal_eval(old.group(1)) == defaults.OLD_MODALITY_NAMES
+    for module in ("app.js", "study/participant.js"):  # no copy of their own
+        assert "MODALITIES = [" not in read(module) and "'auditory-tactile'" not in read(module)
 
 
 def test_the_writer_batch_fallbacks_are_the_server_limits():

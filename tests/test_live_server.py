@@ -53,7 +53,7 @@ def test_page_config_and_profiles(client):
         assert client.get(f"/static/{name}").status_code == 200, name
     config = client.get("/api/config").json()
     assert config["tactile"] == "none" and config["token_required"] is False
-    assert config["modalities"] == ["tactile", "auditory", "auditory-tactile", "none"]
+    assert config["modalities"] == ["tactile", "auditory", "audio-tactile", "none"]
     profiles = client.get("/api/profiles").json()["profiles"]
     assert [p["name"] for p in profiles][:3] == ["pencil", "ballpoint", "marker"]
     for entry in profiles[:3]:
@@ -161,7 +161,7 @@ def test_stroke_reaches_device_in_order_and_the_store(client, store_path):
     (stroke,) = rows(store_path, "SELECT id, pen, profile_version, modality, ink, pointer_type, "
                                  "sample_count, end_reason, ended_at FROM strokes")
     assert stroke[:8] == (stroke_id, "pencil", resolve_profile("pencil").version,
-                          "auditory-tactile", "visible", "pen", 12, "pen_up")
+                          "audio-tactile", "visible", "pen", 12, "pen_up")
     assert stroke[8] is not None
     samples = rows(store_path, "SELECT seq, t, x, y, pressure, tilt_x, tilt_y, speed FROM samples "
                                "ORDER BY seq")

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 __all__ = ["SOUND_RATE_HZ", "SOUND_UNIT_MS", "SOUND_CROSSFADE_MS", "SOUND_REFERENCE_DBFS",
            "SOUND_MODES", "GRAIN_MS", "TEXTURE_LENGTH_MS", "CONDITIONS", "TACTILE_MODELS",
-           "RECOMMENDED_MODEL", "EXPORT_FORMATS", "DEVICE_TIMEOUT_S"]
+           "RECOMMENDED_MODEL", "EXPORT_FORMATS", "DEVICE_TIMEOUT_S", "MODALITIES",
+           "OLD_MODALITY_NAMES", "modality_name"]
 
 # --- friction sound (realpen.sound) ---------------------------------------------------------
 
@@ -49,6 +50,38 @@ sensitivity-weighted log-spectral distance (median 3.30 against 7.64 dB; 1/3-oct
 levels about equal, 6.59 against 6.46 dB; ``benchmarks/bench_fidelity.py``).
 :class:`~realpen.tactile.conditions.TactileParams` itself defaults to ``"sines"``, the method,
 and the study's conditions A–F always use it."""
+
+# --- feedback modalities (live app, studies, statistics) ------------------------------------
+
+MODALITIES = ("tactile", "auditory", "audio-tactile", "none")
+"""The feedback a pen gives while it writes: vibration only, sound only, both, or nothing. The
+one spelling of each that the project writes and shows (designs, the live page and its
+WebSocket, every export, the statistics)."""
+OLD_MODALITY_NAMES = {"auditory-tactile": "audio-tactile"}
+"""Names earlier releases wrote (the live page, its WebSocket and ``realpen strokes export``
+said ``auditory-tactile``): still read, as the current name."""
+
+
+def modality_name(name: str) -> str:
+    """The current name of a feedback modality: an old spelling becomes today's, any other
+    text is returned as it is (checking it is the caller's schema's job).
+
+    Every boundary that reads a modality (a WebSocket message, a URL parameter, a stored row, a
+    CSV read back) passes it through here, so the rest of the project sees one name.
+
+    Args:
+        name: a modality as given (e.g. ``"auditory-tactile"``).
+
+    Returns:
+        The name in :data:`MODALITIES` it stands for, or ``name`` unchanged.
+
+    >>> modality_name("auditory-tactile")
+    'audio-tactile'
+    >>> modality_name("tactile")
+    'tactile'
+    """
+    return OLD_MODALITY_NAMES.get(name, name)
+
 
 # --- exports and the pen --------------------------------------------------------------------
 

@@ -166,7 +166,7 @@ def export(
                                "`realpen sound render`."),
     force: bool = force_option(),
 ) -> None:
-    """Write the stored strokes as CSV: stroke, pen, modality, …, t, x, y, pressure, tilt, speed."""
+    """Write the stored strokes as CSV: stroke, page, pen, modality, …, t, x, y, pressure, tilt, speed."""
     from realpen.live.store import export_csv
     from realpen.study.db import hide_password, store_file
 

@@ -5,8 +5,10 @@ The page sends JSON text frames, one message each, told apart by ``type``:
 ``hello``     once per connection: who is talking (``client``), the ``protocol`` number, and
               the page's own id (``page``, optional): the same across its reconnects, so that
               what it resends after a reconnect is recognised and stored once;
-``pen_down``  a stroke starts: the pen (profile name and content version), the modality, the
-              ink (visible or hidden), the pointer type and the page's calibration (px/mm);
+``pen_down``  a stroke starts: the pen (profile name and content version), the modality
+              (:data:`MODALITIES`; the old name ``auditory-tactile`` is still taken, as
+              ``audio-tactile``), the ink (visible or hidden), the pointer type and the page's
+              calibration (px/mm);
               in a study, the study session and trial number it belongs to (``study_session``,
               ``trial``; optional, both or neither);
 ``samples``   a batch of the stroke's samples (the coalesced pointer events of one event),
@@ -42,8 +44,8 @@ one stroke-sample definition, :class:`realpen.io.strokes.StrokeSample` (:class:`
 class), which the stroke store and stroke rendering use as well.
 
 This module imports pydantic, :mod:`realpen.io.strokes`, :mod:`realpen.io.limits`, the profile
-schema's name rule, :mod:`realpen.errors` and :mod:`realpen.validation` only: loading the
-WebSocket schema loads neither scipy nor soundfile.
+schema's name rule, :mod:`realpen.defaults`, :mod:`realpen.errors` and :mod:`realpen.validation`
+only: loading the WebSocket schema loads neither scipy nor soundfile.
 """
 
 from __future__ import annotations
@@ -51,8 +53,17 @@ from __future__ import annotations
 import json
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    TypeAdapter,
+    ValidationError,
+    model_validator,
+)
 
+from realpen.defaults import MODALITIES, modality_name
 from realpen.errors import RealPenError
 from realpen.io.limits import MAX_JSON_INT, MAX_STORED_INT
 from realpen.io.strokes import StrokeSample, Time
@@ -67,9 +78,16 @@ __all__ = ["PROTOCOL", "MAX_MESSAGE_BYTES", "MAX_SAMPLES", "MODALITIES", "NAME_P
 PROTOCOL = 1
 MAX_MESSAGE_BYTES = 64 * 1024
 MAX_SAMPLES = 512
-MODALITIES = ("tactile", "auditory", "auditory-tactile", "none")
 
-Modality = Literal["tactile", "auditory", "auditory-tactile", "none"]
+
+def _current_modality(value: object) -> object:
+    # The old spelling is read as today's before the name is checked, so the store, the device
+    # and every reply see one name (and a refusal lists only today's names).
+    return modality_name(value) if isinstance(value, str) else value
+
+
+Modality = Annotated[Literal["tactile", "auditory", "audio-tactile", "none"],
+                     BeforeValidator(_current_modality)]
 Ink = Literal["visible", "hidden"]
 PointerType = Literal["pen", "touch", "mouse", "unknown"]
 ErrorCode = Literal["binary", "too_large", "invalid_json", "invalid_message", "protocol",

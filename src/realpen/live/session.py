@@ -24,6 +24,7 @@ import time
 import uuid
 from dataclasses import dataclass
 
+from realpen.defaults import modality_name
 from realpen.errors import ParameterError
 from realpen.live.catalog import Catalog
 from realpen.live.device import Origin, PenDevice
@@ -45,7 +46,7 @@ from realpen.study.db import STORE_ERRORS, error_line
 __all__ = ["Session", "OpenStroke", "TACTILE_MODALITIES"]
 
 log = logging.getLogger(__name__)
-TACTILE_MODALITIES = ("tactile", "auditory-tactile")
+TACTILE_MODALITIES = ("tactile", "audio-tactile")
 
 
 @dataclass
@@ -207,7 +208,8 @@ class Session:
             raise MessageError("protocol", f"stroke {number} is not down ({down})")
         entry = self.catalog.get(found.pen)
         if self.stroke is None and found.end_reason != "pen_up" and entry is not None:
-            tactile = found.modality in TACTILE_MODALITIES
+            # a stroke stored by an earlier release may say "auditory-tactile"
+            tactile = modality_name(found.modality) in TACTILE_MODALITIES
             self.device.pen_down(Origin(self.id, number, None), entry.profile, tactile)
             self.stroke = OpenStroke(number, found.stroke_id,
                                      entry.profile.meta.coupling.a_max, tactile)

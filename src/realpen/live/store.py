@@ -45,11 +45,12 @@ from concurrent.futures import Future
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
-from sqlalchemy import Connection, bindparam, func, select, text, update
+from sqlalchemy import Connection, bindparam, case, func, inspect, select, text, update
 from sqlalchemy.dialects import postgresql as pg_dialect
 from sqlalchemy.dialects import sqlite as sqlite_dialect
 from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 
+from realpen.defaults import OLD_MODALITY_NAMES
 from realpen.errors import ParameterError, fail
 from realpen.io.files import atomic_path
 from realpen.io.limits import MAX_STORED_INT
@@ -66,9 +67,13 @@ SHUTDOWN_WAIT_S = 30.0  # how long a server's shutdown waits for the database to
 # is alone, so strokes left open there were left by a server that died (an arbitrary 64-bit key).
 _PRESENCE_LOCK = 0x5245_414C_5045_4E02
 log = logging.getLogger(__name__)
-STROKE_FIELDS = ("stroke", "session", "page_stroke", "pen", "profile_version", "modality", "ink",
+# ``page`` (the page's own id, within which ``page_stroke`` counts) was ``session`` before: the
+# export's one "session" is now the study export's, a participant's session of a design.
+STROKE_FIELDS = ("stroke", "page", "page_stroke", "pen", "profile_version", "modality", "ink",
                  "pointer_type", "px_per_mm", "calibrated", "started_at")
+"""The stroke's columns of :func:`export_csv`'s CSV, in order."""
 CSV_COLUMNS = STROKE_FIELDS + ("sample",) + SAMPLE_FIELDS
+"""The columns of :func:`export_csv`'s CSV: the stroke's, the sample's number, the sample."""
 _SAMPLE_COLUMNS = ("stroke_id", "seq") + SAMPLE_FIELDS
 
 # The statements of the live path (each store compiles them once for its database).
@@ -428,8 +433,14 @@ class StrokeStore:
 
 
 def _rows(conn: Connection, stroke: int | None) -> Iterable[tuple]:
-    query = select(strokes.c.id, strokes.c.session, strokes.c.page_stroke, strokes.c.pen,
-                   strokes.c.profile_version, strokes.c.modality, strokes.c.ink,
+    # A stroke stored before pages named themselves (a store of the first schema has no such
+    # column, and is read as it is) has only its connection's id; one stored by an earlier
+    # release may say "auditory-tactile": the CSV says today's name.
+    named = "page" in {column["name"] for column in inspect(conn).get_columns("strokes")}
+    page = func.coalesce(strokes.c.page, strokes.c.session) if named else strokes.c.session
+    modality = case(OLD_MODALITY_NAMES, value=strokes.c.modality, else_=strokes.c.modality)
+    query = select(strokes.c.id, page, strokes.c.page_stroke, strokes.c.pen,
+                   strokes.c.profile_version, modality, strokes.c.ink,
                    strokes.c.pointer_type, strokes.c.px_per_mm, strokes.c.calibrated,
                    strokes.c.started_at, samples.c.seq,
                    *(samples.c[name] for name in SAMPLE_FIELDS)).join_from(
@@ -444,8 +455,12 @@ def export_csv(store: str | os.PathLike, output: str | os.PathLike,
                stroke: int | None = None) -> tuple[int, int]:
     """Write one CSV row per sample (columns :data:`CSV_COLUMNS`) atomically.
 
-    The columns ``t``, ``x``, ``y``, ``pressure`` (s since pen down, mm, mm, 0–1) make one
-    stroke's rows (``stroke=ID``) a trajectory that ``realpen sound render`` reads.
+    ``stroke`` is the stroke's id in the store; ``page`` the id of the page that drew it (the
+    same across the page's reconnects) and ``page_stroke`` its number there; ``modality`` one
+    of :data:`realpen.defaults.MODALITIES` (a stroke stored as ``auditory-tactile`` by an
+    earlier release is written ``audio-tactile``). The columns ``t``, ``x``, ``y``,
+    ``pressure`` (s since pen down, mm, mm, 0–1) make one stroke's rows (``stroke=ID``) a
+    trajectory that ``realpen sound render`` reads.
 
     Args:
         store: the store: an SQLite file or a database URL.

@@ -29,11 +29,10 @@ import { CSS_PX_PER_MM, MOUSE_PRESSURE, SPEED_WINDOW_MS } from './pen.js';
 import { AudioEngine, startOnActivation } from './audio.js';
 import { Ink, inkStyle } from './ink.js';
 import { Link } from './link.js';
-import { Writer, liveState, tactileOn } from './writer.js';
+import { MODALITIES, Writer, liveState, modalityName, tactileOn } from './writer.js';
 import { PenLink, support as penSupport } from './pen-link.js';
 import { VibrationGrid } from './grid.js';
 
-const MODALITIES = ['tactile', 'auditory', 'auditory-tactile', 'none'];
 const INKS = ['visible', 'hidden'];
 
 const query = new URLSearchParams(window.location.search);
@@ -74,7 +73,9 @@ const describe = (error) => String((error && error.message && error.name)
 
 const state = liveState({
   notice: null,
-  modality: pick(query.get('modality'), MODALITIES, pick(saved.get('modality'), MODALITIES, 'auditory-tactile')),
+  // ?modality=auditory-tactile (the old name) still works, as does a setting saved with it.
+  modality: pick(modalityName(query.get('modality')), MODALITIES,
+    pick(modalityName(saved.get('modality')), MODALITIES, 'audio-tactile')),
   ink: pick(query.get('ink'), INKS, pick(saved.get('ink'), INKS, 'visible')),
   pxPerMm: saved.get('pxPerMm', CSS_PX_PER_MM),
   calibrated: saved.get('pxPerMm', null) !== null,

@@ -53,8 +53,17 @@ export function liveState(fields) {
   };
 }
 
-export const soundOn = (modality) => modality === 'auditory' || modality === 'auditory-tactile';
-export const tactileOn = (modality) => modality === 'tactile' || modality === 'auditory-tactile';
+/** The feedback modalities, as the server's messages name them (realpen.defaults.MODALITIES). */
+export const MODALITIES = ['tactile', 'auditory', 'audio-tactile', 'none'];
+/** Names earlier releases used (in saved settings, bookmarked URLs): read as today's. */
+export const OLD_MODALITY_NAMES = { 'auditory-tactile': 'audio-tactile' };
+
+/** A modality's current name: an old spelling becomes today's; anything else is returned as it is. */
+export const modalityName = (name) => (Object.hasOwn(OLD_MODALITY_NAMES, name)
+  ? OLD_MODALITY_NAMES[name] : name);
+
+export const soundOn = (modality) => modality === 'auditory' || modality === 'audio-tactile';
+export const tactileOn = (modality) => modality === 'tactile' || modality === 'audio-tactile';
 
 export class Writer {
   /**

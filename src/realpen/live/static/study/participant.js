@@ -8,7 +8,13 @@
 // the tap on Next when there are several questions or a scale to confirm).
 //
 // Nothing the participant sees names the design, the condition, the modality or the pen: only
-// the task. The layout is symmetric (nothing on one side only) so it favours neither hand.
+// the task. A pen is named only as the design labels it for the participant (its `label`, or a
+// choice as the design wrote it): never by its id or its profile's name, not even in an error,
+// which says "this trial's pen" (the details go to the browser's console, for the experimenter).
+// The layout is symmetric (nothing on one side only) so it favours neither hand.
+//
+// The trial's pen is played from its profile (`next.profile`); the pen's id (`next.pen`) is what
+// the server stores with the answers.
 //
 // Strokes go through the writing page's own pipeline (writer.js, link.js): stored exactly as
 // there, each pen_down naming the study session and the trial.
@@ -28,13 +34,12 @@ import { CSS_PX_PER_MM } from '../pen.js';
 import { AudioEngine, startOnActivation } from '../audio.js';
 import { Ink } from '../ink.js';
 import { Link } from '../link.js';
-import { Writer, liveState } from '../writer.js';
+import { MODALITIES, Writer, liveState, modalityName } from '../writer.js';
 import { bytes, call, forgetTokenInAddress, Refused, sleep, Unreachable, withToken } from './api.js';
 
 const PAUSED_POLL_MS = 1000;  // while paused: ask again every second
 const WATCH_MS = 1000;        // during a trial: is the session still running?
 const RETRY_MS = [250, 500, 1000, 2000];  // waits between tries of a request that did not get through
-const LIVE_MODALITIES = ['tactile', 'auditory', 'auditory-tactile', 'none'];
 
 const $ = (id) => document.getElementById(id);
 const query = new URLSearchParams(window.location.search);
@@ -228,6 +233,14 @@ function soundOf(profile) {
   return soundBuffers.get(url);
 }
 
+/** A trial's pen could not be loaded; its message names no pen (the participant reads it). */
+class PenUnavailable extends Error {
+  constructor() {
+    super("this trial's pen could not be loaded");
+    this.name = 'PenUnavailable';
+  }
+}
+
 /** Whether the participant writes in this trial: the server's `writing` when it says, else
  *  when the trial has a pen and some feedback (a questionnaire-only trial has modality none). */
 function writes(next) {
@@ -238,17 +251,33 @@ function writes(next) {
 
 /** Set the trial's pen, feedback and ink, and load its sound and tactile pattern. */
 async function prepare(next) {
-  state.modality = LIVE_MODALITIES.includes(next.live_modality) ? next.live_modality : 'none';
+  const modality = modalityName(next.live_modality);
+  state.modality = MODALITIES.includes(modality) ? modality : 'none';
   state.ink = next.ink === 'hidden' ? 'hidden' : 'visible';
   if (!writes(next)) return;
-  const profile = state.profiles.find((p) => p.name === next.pen);
-  if (!profile) throw new Error(`the pen '${next.pen}' is not offered by this server`);
+  // A server from before `profile` was sent named the profile by the pen.
+  const wanted = next.profile || next.pen;
+  const profile = state.profiles.find((p) => p.name === wanted);
+  if (!profile) {
+    console.warn(`realpen study: trial ${next.trial} plays the pen profile '${wanted}', which `
+      + 'this server does not offer');
+    throw new PenUnavailable();
+  }
   // The trial's own tactile pattern (a study condition's); without one, the pen's.
   const tactileUrl = next.tactile_url || `/${profile.tactile.url}`;
-  const [sound, tactile] = await Promise.all([
-    soundOf(profile),
-    tactileLoaded.url === tactileUrl ? tactileLoaded.buffer : decode(tactileUrl),
-  ]);
+  let sound;
+  let tactile;
+  try {
+    [sound, tactile] = await Promise.all([
+      soundOf(profile),
+      tactileLoaded.url === tactileUrl ? tactileLoaded.buffer : decode(tactileUrl),
+    ]);
+  } catch (error) {
+    // The server's reason may name the profile: the console has it, the screen does not.
+    console.warn(`realpen study: trial ${next.trial}'s pen (profile '${wanted}') did not load:`,
+      error);
+    throw new PenUnavailable();
+  }
   tactileLoaded = { url: tactileUrl, buffer: tactile };
   Object.assign(state, { pen: profile.name, profileVersion: profile.version,
     coupling: profile.coupling });
@@ -268,6 +297,23 @@ function button(label, value, className = '') {
 }
 
 const capitalised = (text) => text.charAt(0).toUpperCase() + text.slice(1);
+
+/** What the participant reads for a choice: the server's label for it (a labelled pen's
+ *  label), else the choice as the design wrote it. */
+function choiceLabel(question, choice) {
+  const index = (question.choices || []).indexOf(choice);
+  const label = index >= 0 && Array.isArray(question.labels) ? question.labels[index] : null;
+  return typeof label === 'string' && label ? label : String(choice);
+}
+
+/** The feedback's sentence for the right pen: its label as the design wrote it ("It was Pen
+ *  A."), the choice it was shown as ("It was the ballpoint."), or none when the participant was
+ *  never shown a name for it. */
+function feedbackText(question, pen) {
+  if (!question || !(question.choices || []).includes(pen)) return '';
+  const label = choiceLabel(question, pen);
+  return label === pen ? `It was the ${pen}.` : `It was ${label}.`;
+}
 
 /** One question's element; `onAnswer(value)` hears each answer given. */
 function questionElement(question, onAnswer) {
@@ -313,7 +359,7 @@ function questionElement(question, onAnswer) {
     group.setAttribute('role', 'radiogroup');
     group.setAttribute('aria-labelledby', text.id);
     for (const choice of question.choices || []) {
-      const element = button(capitalised(String(choice)), choice, 'choice');
+      const element = button(capitalised(choiceLabel(question, choice)), choice, 'choice');
       element.addEventListener('click', () => pick(group, element, choice));
       group.append(element);
     }
@@ -392,7 +438,7 @@ async function submit(next) {
   const pending = { trial: next.trial, answers: collect(next), rt_ms: rtMs };
   try {
     const { body } = await send(pending);
-    await showFeedback(body && body.feedback);
+    await showFeedback(body && body.feedback, next);
     endTrial('answered');
   } catch (error) {
     delete document.body.dataset.sending;
@@ -406,12 +452,13 @@ async function submit(next) {
 }
 
 /** A training trial's feedback (the right pen), shown after the answer until Continue. */
-async function showFeedback(feedback) {
-  const shown = Object.values(feedback || {});
+async function showFeedback(feedback, next) {
+  const shown = Object.entries(feedback || {});
   if (!shown.length) return;
-  const { correct, answer } = shown[0];
+  const [questionId, { correct, answer }] = shown[0];
   study.feedback = { correct, answer };
-  showScreen('feedback', correct ? 'Right' : 'Not quite', `It was the ${answer}.`);
+  const question = next.questions.find((q) => q.id === questionId);
+  showScreen('feedback', correct ? 'Right' : 'Not quite', feedbackText(question, answer));
   // The participant reads it at their own pace; the trial's time was taken at the answer.
   await new Promise((resolve) => {
     $('continue').addEventListener('click', resolve, { once: true });
