@@ -488,6 +488,10 @@ CORPUS = [
         "postgresql://u@/x?host=/nonexistent&password=hunter2 -o answers.csv", "password=***"),
     bad("study-export-bad-url", "study export --store postgresql://u:secret@/x?host=/nonexistent "
         "-o answers.csv", "postgresql://u:***@"),
+    bad("study-start-unknown-design", "study start study9 -p P01 --store store.sqlite", "study9"),
+    bad("study-withdraw-missing-store", "study withdraw P01 --study study1 --store none.sqlite",
+        "none.sqlite"),
+    bad("study-abandon-nothing-named", "study abandon --store store.sqlite", "--stale"),
     bad("stats-missing-trials", "stats report study1 none.csv -o report", "none.csv"),
     bad("stats-trajectory-as-trials", "stats report study1 t.csv -o report", "t.csv"),
     bad("stats-empty-trials", "stats study1 empty.csv -o report", "empty.csv"),

@@ -70,7 +70,7 @@ def test_a_new_store_is_made_at_the_newest_revision(store_target):
         "SELECT tablename FROM pg_tables WHERE schemaname='public'"))}
     assert TABLES <= names
     assert store_rows(store_target, "SELECT version_num FROM alembic_version") == \
-        [(head_revision(),)] == [("0002",)]
+        [(head_revision(),)] == [("0003",)]
     if database.path is not None:
         assert store_rows(store_target, "PRAGMA user_version") == [(SQLITE_USER_VERSION,)]
     again = open_database(store_target, create=False)  # current: opened without migrating
@@ -137,14 +137,14 @@ def test_an_old_sqlite_store_is_upgraded_in_place_with_its_rows(tmp_path, versio
     store = StrokeStore(path)
     try:
         assert store.count() == (2, 4)
-        assert store.database.revision == "0002"
+        assert store.database.revision == "0003"
         # The old rows are found again by their page (version 1: the connection's session).
         assert store.begin_stroke(session="abc", page_stroke=2, page_t0=0.0, **STROKE) == 2
         assert store.begin_stroke(session="abc", page_stroke=3, page_t0=0.0, **STROKE) == 3
     finally:
         store.close()
     assert store_rows(path, "PRAGMA user_version") == [(3,)]
-    assert store_rows(path, "SELECT version_num FROM alembic_version") == [("0002",)]
+    assert store_rows(path, "SELECT version_num FROM alembic_version") == [("0003",)]
     assert store_rows(path, "SELECT id, page, sample_count, study_session, trial FROM strokes "
                             "ORDER BY id") == [(1, "abc", 2, None, None), (2, "abc", 2, None, None),
                                                (3, "abc", 0, None, None)]

@@ -22,7 +22,7 @@ from realpen.study.design import load_design
 
 HEADER = ["study", "participant", "session", "block", "trial", "phase", "condition", "modality",
           "pen", "question", "answer", "correct", "rt_ms", "site", "started_at", "answered_at",
-          "age", "gender", "handedness", "repetition", "ink", "design_version"]
+          "age", "gender", "handedness", "repetition", "ink", "design_version", "session_state"]
 
 DESIGNS = {name: load_design(name) for name in ("study1", "study2")}
 
@@ -171,7 +171,7 @@ def test_trials_csv_header_order_and_values(store, tmp_path):
         "site": "Tokyo lab 2", "started_at": "2026-11-23T10:11:11.111+00:00",
         "answered_at": "2026-11-23T10:11:12.345+00:00", "age": "24", "gender": "m",
         "handedness": "left", "repetition": "0", "ink": "hidden",
-        "design_version": DESIGNS["study1"].version}
+        "design_version": DESIGNS["study1"].version, "session_state": "running"}
     assert [r["answer"] for r in body] == ["3", "4", "3", "4", "marker", "ballpoint", "2", "5"]
     assert [r["correct"] for r in body] == ["", "", "", "", "1", "0", "", ""]
     assert [r["rt_ms"] for r in body[4:]] == ["999.999", "2000.000", "0.000", "0.000"]
@@ -397,11 +397,11 @@ def test_failure_midway_leaves_no_file(tmp_path, monkeypatch):
     out.write_text("the previous export\n", encoding="utf-8")
     calls = []
 
-    def broken(row):  # the disk fills up after a few rows
+    def broken(row, *rest):  # the disk fills up after a few rows
         calls.append(row)
         if len(calls) > 3:
             raise OSError(28, "No space left on device")
-        return original(row)
+        return original(row, *rest)
 
     original = ex._csv_row
     monkeypatch.setattr(ex, "_csv_row", broken)
@@ -416,7 +416,7 @@ def test_failure_midway_leaves_no_file(tmp_path, monkeypatch):
 def test_failure_in_the_strokes_leaves_no_file(tmp_path, monkeypatch):
     path, _ = sqlite_store(tmp_path)
 
-    def broken(connection, study_ids):
+    def broken(connection, study_ids, *rest):
         yield (1, 1, 1, 0, "pencil", "tactile", 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0)
         raise OSError(5, "Input/output error")
 
@@ -452,8 +452,8 @@ def test_one_snapshot_for_all_files(store, tmp_path, monkeypatch):
     target, ids = store
     original = ex._answer_rows
 
-    def then_a_server_writes(connection, study_ids):
-        rows = original(connection, study_ids)
+    def then_a_server_writes(connection, study_ids, *rest):
+        rows = original(connection, study_ids, *rest)
         writer = StoreBuilder(target)
         try:
             writer.stroke(ids["ses_p01"], 2, 2, samples=5)

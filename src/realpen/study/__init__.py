@@ -11,9 +11,12 @@
   each participant's order of blocks and trials;
 - :mod:`~realpen.study.sessions` — running a session: create or resume, the next trial,
   answers (each durably committed before it is acknowledged), progress;
+- :mod:`~realpen.study.admin` — administering a study: withdraw a participant (their data
+  deleted, a record kept), abandon sessions, find a session by its participant;
 - :mod:`~realpen.study.patterns` — a trial's tactile pattern: the pen's own, or rebuilt from
   its source with a condition's parameters;
-- :mod:`~realpen.study.export` — one row per answer for analysis, a JSON sidecar, strokes.
+- :mod:`~realpen.study.export` — one row per answer for analysis, a JSON sidecar, strokes,
+  sessions.
 
 May import: :mod:`realpen.io`, :mod:`realpen.errors`, :mod:`realpen.validation`,
 :mod:`realpen._version`, :mod:`realpen.tactile`, :mod:`realpen.profile`, :mod:`realpen.pens`;

@@ -12,12 +12,20 @@
   ``rt_ms`` (ms from the trial's start to the answer, as the page measured it) has three
   decimals; ``started_at`` is the trial's start, ``answered_at`` minus ``rt_ms`` (the page's
   own measure, not the session's start); times are ISO 8601 in UTC with milliseconds;
+  ``session_state`` is the session's state (``abandoned``: a participant who did not finish);
 - its JSON sidecar beside it (``trials.json`` for ``trials.csv``, as BIDS does for events
   files): every column with its ``Description``, ``Units`` where it has one and ``Levels`` for
   the categorical ones (from the designs and trials present), what generated the file, from
   which store (password hidden), when, and the designs (name, version) included;
 - optionally the strokes CSV (:data:`STROKE_COLUMNS`, one row per pen sample of the strokes
-  drawn in a study session, keyed by session and trial) and its own sidecar.
+  drawn in a study session, keyed by session and trial) and its own sidecar;
+- optionally the sessions CSV (:data:`SESSION_COLUMNS`, one row per session, answered or not)
+  and its own sidecar.
+
+Pilot sessions are left out of every file unless ``include_pilot`` is given; then each file
+has a last column ``pilot`` (``1`` for a pilot session, ``0`` for the others). A withdrawn
+participant's session has no answers or strokes left (:func:`realpen.study.admin.withdraw`):
+it is only in the sessions CSV, as a record with state ``withdrawn`` and no data.
 
 The store is read in one read transaction: a consistent snapshot (what a server commits
 meanwhile is in none of the files) that never blocks the live server's writes (SQLite's WAL
@@ -48,18 +56,25 @@ if TYPE_CHECKING:
     from realpen.study.db import Database
 
 __all__ = ["export_trials", "ExportSummary", "KEY_COLUMNS", "TIME_COLUMNS", "EXTRA_COLUMNS",
-           "CSV_COLUMNS", "STROKE_COLUMNS", "sidecar_path"]
+           "CSV_COLUMNS", "STROKE_COLUMNS", "SESSION_COLUMNS", "PILOT_COLUMN", "sidecar_path"]
 
 KEY_COLUMNS = ("study", "participant", "session", "block", "trial", "phase", "condition",
                "modality", "pen", "question", "answer", "correct", "rt_ms")
 """The first columns of the trials CSV, exactly in this order."""
 TIME_COLUMNS = ("site", "started_at", "answered_at")
 """The columns after :data:`KEY_COLUMNS`."""
-EXTRA_COLUMNS = ("age", "gender", "handedness", "repetition", "ink", "design_version")
-"""The last columns: demographics, and more of the trial and its design."""
+EXTRA_COLUMNS = ("age", "gender", "handedness", "repetition", "ink", "design_version",
+                 "session_state")
+"""The last columns: demographics, more of the trial and its design, the session's state."""
 CSV_COLUMNS = KEY_COLUMNS + TIME_COLUMNS + EXTRA_COLUMNS
 STROKE_COLUMNS = ("session", "trial", "stroke", "sample", "pen", "modality") + SAMPLE_FIELDS
 """The columns of the strokes CSV: one row per pen sample."""
+SESSION_COLUMNS = ("study", "participant", "session", "state", "index", "seed", "site",
+                   "started_at", "finished_at", "withdrawn_at", "trials", "answered",
+                   "design_version")
+"""The columns of the sessions CSV: one row per session."""
+PILOT_COLUMN = "pilot"
+"""The column every file gains (last) when pilot sessions are included: 1 pilot, 0 not."""
 
 _JOURNAL_SUFFIXES = ("", "-wal", "-shm", "-journal")
 _MODALITIES = {
@@ -87,7 +102,8 @@ class ExportSummary:
         strokes: strokes in the strokes CSV (0 when none was asked for).
         samples: sample rows in the strokes CSV.
         paths: every file written: the trials CSV, its sidecar, then the strokes CSV and its
-            sidecar when asked for.
+            sidecar, then the sessions CSV and its sidecar, when asked for.
+        session_rows: rows in the sessions CSV (0 when none was asked for).
     """
 
     rows: int
@@ -96,6 +112,7 @@ class ExportSummary:
     strokes: int
     samples: int
     paths: tuple[Path, ...]
+    session_rows: int = 0
 
 
 def sidecar_path(csv_path: str | os.PathLike) -> Path:
@@ -247,9 +264,43 @@ def _studies(connection, store: Database, design: str | None) -> list[Any]:
     return rows
 
 
-def _answer_rows(connection, study_ids: list[int]) -> list[dict[str, Any]]:
-    """Every answer of the answered trials of these studies, with its trial, session,
-    participant and study, in the export's order."""
+@dataclass(frozen=True)
+class _Sessions:
+    """Which sessions' data an export writes, on the schema the store has.
+
+    Attributes:
+        administered: the store has the administration columns (``pilot``, ``withdrawn_at``;
+            revision 0003 on): an older one is read as it is, with neither pilots nor
+            withdrawals.
+        include_pilot: pilot sessions are written (with the ``pilot`` column).
+    """
+
+    administered: bool
+    include_pilot: bool
+
+    def pilot(self):
+        """The ``pilot`` column as a select expression (false on an older schema)."""
+        from sqlalchemy import false
+
+        from realpen.study import tables as t
+
+        return (t.sessions.c.pilot if self.administered else false()).label("pilot")
+
+    def kept(self, with_withdrawn: bool = False) -> list:
+        """The WHERE clauses that keep the sessions this export writes."""
+        from sqlalchemy import false
+
+        from realpen.study import tables as t
+
+        clauses = [] if with_withdrawn else [t.sessions.c.state != "withdrawn"]
+        if self.administered and not self.include_pilot:
+            clauses.append(t.sessions.c.pilot == false())
+        return clauses
+
+
+def _answer_rows(connection, study_ids: list[int], chosen: _Sessions) -> list[dict[str, Any]]:
+    """Every answer of the answered trials of these studies' chosen sessions, with its trial,
+    session, participant and study, in the export's order."""
     from sqlalchemy import select
 
     from realpen.study import tables as t
@@ -263,12 +314,13 @@ def _answer_rows(connection, study_ids: list[int]) -> list[dict[str, Any]]:
                p.c.site.label("participant_site"), s.c.id.label("session"),
                s.c.site.label("session_site"), tr.c.n.label("trial"), tr.c.block, tr.c.phase,
                tr.c.condition, tr.c.modality, tr.c.pen, tr.c.ink, tr.c.repetition, tr.c.plan,
-               tr.c.answered_at, tr.c.rt_ms, a.c.question, a.c.answer, a.c.correct)
+               tr.c.answered_at, tr.c.rt_ms, a.c.question, a.c.answer, a.c.correct,
+               s.c.state.label("session_state"), chosen.pilot())
         .select_from(a.join(tr, (tr.c.session_id == a.c.session_id) & (tr.c.n == a.c.n))
                      .join(s, s.c.id == tr.c.session_id)
                      .join(p, p.c.id == s.c.participant_id)
                      .join(st, st.c.id == s.c.study_id))
-        .where(s.c.study_id.in_(study_ids), tr.c.answered_at.is_not(None))
+        .where(s.c.study_id.in_(study_ids), tr.c.answered_at.is_not(None), *chosen.kept())
     )
     rows = [dict(row._mapping) for row in connection.execute(query)]
     orders: dict[tuple[int, int], dict[str, int]] = {}
@@ -300,7 +352,7 @@ def _start_of(answered_at: str | None, rt_ms: float | None) -> str:
     return start.isoformat(timespec="milliseconds")
 
 
-def _csv_row(row: Mapping[str, Any]) -> list[Any]:
+def _csv_row(row: Mapping[str, Any], columns: tuple[str, ...]) -> list[Any]:
     correct = row["correct"]
     rt = row["rt_ms"]
     values = {
@@ -309,23 +361,65 @@ def _csv_row(row: Mapping[str, Any]) -> list[Any]:
         "correct": "" if correct is None else int(bool(correct)),
         "rt_ms": "" if rt is None else f"{rt:.3f}",
         "started_at": _start_of(row["answered_at"], rt),
+        PILOT_COLUMN: int(bool(row["pilot"])),
     }
-    return ["" if values[name] is None else values[name] for name in CSV_COLUMNS]
+    return ["" if values[name] is None else values[name] for name in columns]
 
 
-def _sample_rows(connection, study_ids: list[int]) -> Iterable[Any]:
-    from sqlalchemy import func, select
+def _session_rows(connection, study_ids: list[int], chosen: _Sessions) -> list[dict[str, Any]]:
+    """One row per chosen session of these studies (withdrawn ones too: their record), with
+    its trial and answer counts, in the export's order."""
+    from sqlalchemy import func, literal, select
 
+    from realpen.study import tables as t
+
+    if not study_ids:
+        return []
+    s, p, st, tr = t.sessions, t.participants, t.studies, t.trials
+    counts = (select(tr.c.session_id, func.count().label("trials"),
+                     func.count(tr.c.answered_at).label("answered"))
+              .group_by(tr.c.session_id).subquery())
+    withdrawn_at = s.c.withdrawn_at if chosen.administered else literal(None)
+    query = (
+        select(st.c.name.label("study"), st.c.version.label("design_version"),
+               p.c.code.label("participant"), s.c.id.label("session"), s.c.state,
+               s.c.plan_index.label("index"), s.c.seed, s.c.site.label("session_site"),
+               p.c.site.label("participant_site"), s.c.started_at, s.c.finished_at,
+               withdrawn_at.label("withdrawn_at"),
+               func.coalesce(counts.c.trials, 0).label("trials"),
+               func.coalesce(counts.c.answered, 0).label("answered"), chosen.pilot())
+        .select_from(s.join(p, p.c.id == s.c.participant_id).join(st, st.c.id == s.c.study_id)
+                     .outerjoin(counts, counts.c.session_id == s.c.id))
+        .where(s.c.study_id.in_(study_ids), *chosen.kept(with_withdrawn=True))
+    )
+    rows = [dict(row._mapping) for row in connection.execute(query)]
+    rows.sort(key=lambda r: (r["study"], r["participant"], r["session"]))
+    return rows
+
+
+def _session_csv_row(row: Mapping[str, Any], columns: tuple[str, ...]) -> list[Any]:
+    values = {**row, "site": row["session_site"] or row["participant_site"] or "",
+              PILOT_COLUMN: int(bool(row["pilot"]))}
+    return ["" if values[name] is None else values[name] for name in columns]
+
+
+def _sample_rows(connection, study_ids: list[int], chosen: _Sessions) -> Iterable[Any]:
+    from sqlalchemy import case, func, select
+
+    from realpen.defaults import OLD_MODALITY_NAMES
     from realpen.study import tables as t
 
     if not study_ids:
         return []
     k, m, s = t.strokes, t.samples, t.sessions
     query = (
-        select(k.c.study_session, k.c.trial, k.c.id, m.c.seq, k.c.pen, k.c.modality,
-               *(m.c[name] for name in SAMPLE_FIELDS))
+        # strokes stored by an earlier release may carry a modality's old name
+        select(k.c.study_session, k.c.trial, k.c.id, m.c.seq, k.c.pen,
+               case(OLD_MODALITY_NAMES, value=k.c.modality, else_=k.c.modality),
+               *(m.c[name] for name in SAMPLE_FIELDS),
+               *([chosen.pilot()] if chosen.include_pilot else []))
         .select_from(m.join(k, k.c.id == m.c.stroke_id).join(s, s.c.id == k.c.study_session))
-        .where(s.c.study_id.in_(study_ids))
+        .where(s.c.study_id.in_(study_ids), *chosen.kept())
         .order_by(k.c.study_session, func.coalesce(k.c.trial, -1), k.c.id, m.c.seq)
     )
     # Streamed (a server-side cursor on PostgreSQL): a study's samples may not fit in memory.
@@ -354,8 +448,26 @@ def _described(values: Iterable[str], known: Mapping[str, list[str]], default) -
     return {value: "; ".join(known.get(value, [])) or default(value) for value in values}
 
 
+_STATES = {
+    "running": "the session was running when exported",
+    "paused": "the operator had paused the session",
+    "finished": "the session was finished (every trial answered, or ended by the operator)",
+    "abandoned": "the participant left before the end: the answers so far (an incomplete "
+                 "participant)",
+    "withdrawn": "the participant withdrew consent: their data was deleted (a record only)",
+}
+_PILOT = {"Description": "Whether the session was a pilot (a try-out of the study, not a "
+                         "participant's data): 1 pilot, 0 not. Present only when pilot sessions "
+                         "were included (realpen study export --include-pilot).",
+          "Levels": {"1": "a pilot session", "0": "a participant's session"}}
+
+
+def _pilot_sidecar(chosen: _Sessions) -> dict[str, Any]:
+    return {PILOT_COLUMN: _PILOT} if chosen.include_pilot else {}
+
+
 def _trials_sidecar(connection, store: Database, studies: list[Any], exported_at: str,
-                    rows: int) -> dict[str, Any]:
+                    rows: int, chosen: _Sessions) -> dict[str, Any]:
     """The trials CSV's sidecar: every column, and the designs' levels of the categorical ones."""
     from realpen.study import tables as t
 
@@ -447,6 +559,12 @@ def _trials_sidecar(connection, store: Database, studies: list[Any], exported_at
         "design_version": {"Description": "The SHA-256 of the design as run (its canonical JSON): "
                                           "rows with the same design_version ran the same design.",
                            "Levels": {row.version: row.name for row in studies}},
+        "session_state": {"Description": "The session's state when exported: an abandoned "
+                                         "session's answers are those of a participant who did "
+                                         "not finish.",
+                          "Levels": {state: _STATES[state] for state in t.SESSION_STATES
+                                     if state != "withdrawn"}},
+        **_pilot_sidecar(chosen),
         **_provenance(store, studies, exported_at, "realpen study export"),
         "Rows": rows,
     }
@@ -460,8 +578,43 @@ def _provenance(store: Database, studies: list[Any], exported_at: str, command: 
             "Designs": [{"Name": row.name, "Version": row.version} for row in studies]}
 
 
+def _sessions_sidecar(store: Database, studies: list[Any], exported_at: str, rows: int,
+                      chosen: _Sessions) -> dict[str, Any]:
+    from realpen.study import tables as t
+
+    return {
+        "study": {"Description": "The design's name (the trials CSV's 'study')."},
+        "participant": {"Description": "The participant's ID as the operator typed it; "
+                                       "'withdrawn-<session>' once the participant withdrew."},
+        "session": {"Description": "The session's id in the store (the trials CSV's "
+                                   "'session')."},
+        "state": {"Description": "The session's state.",
+                  "Levels": {state: _STATES[state] for state in t.SESSION_STATES}},
+        "index": {"Description": "The plan row the session ran (0-based): its counterbalanced "
+                                 "order. A pilot's or a withdrawn session's row is free for a "
+                                 "participant."},
+        "seed": {"Description": "The seed of the session's plan."},
+        "site": {"Description": "The site (lab) where the session ran."},
+        "started_at": {"Description": "When the session was made. ISO 8601, UTC, milliseconds.",
+                       "Units": "ISO 8601 UTC"},
+        "finished_at": {"Description": "When the session finished or was abandoned (empty: it "
+                                       "has not ended, or was withdrawn before it ended). ISO "
+                                       "8601, UTC, milliseconds.", "Units": "ISO 8601 UTC"},
+        "withdrawn_at": {"Description": "When the participant withdrew consent (empty: they "
+                                        "did not). ISO 8601, UTC, milliseconds.",
+                         "Units": "ISO 8601 UTC"},
+        "trials": {"Description": "The session's planned trials (0 once withdrawn)."},
+        "answered": {"Description": "Its answered trials (0 once withdrawn)."},
+        "design_version": {"Description": "The SHA-256 of the design as run (its canonical JSON).",
+                           "Levels": {row.version: row.name for row in studies}},
+        **_pilot_sidecar(chosen),
+        **_provenance(store, studies, exported_at, "realpen study export, sessions file"),
+        "Rows": rows,
+    }
+
+
 def _strokes_sidecar(store: Database, studies: list[Any], exported_at: str, strokes: int,
-                     samples: int) -> dict[str, Any]:
+                     samples: int, chosen: _Sessions) -> dict[str, Any]:
     return {
         "session": {"Description": "The study session the stroke was drawn in (the 'session' "
                                    "column of the trials CSV)."},
@@ -484,6 +637,7 @@ def _strokes_sidecar(store: Database, studies: list[Any], exported_at: str, stro
                    "Units": "degrees"},
         "speed": {"Description": "Pen speed as the page measured it (over 20 ms).",
                   "Units": "mm/s"},
+        **_pilot_sidecar(chosen),
         **_provenance(store, studies, exported_at, "realpen study export, strokes file"),
         "Strokes": strokes,
         "Rows": samples,
@@ -500,9 +654,12 @@ def _realpen_version() -> str:
 
 def export_trials(target: str | os.PathLike, output: str | os.PathLike, *,
                   design: str | None = None,
-                  strokes: str | os.PathLike | None = None) -> ExportSummary:
+                  strokes: str | os.PathLike | None = None,
+                  sessions: str | os.PathLike | None = None,
+                  include_pilot: bool = False) -> ExportSummary:
     """Write a store's answers as CSV (one row per answer) with a JSON sidecar; optionally the
-    strokes drawn in study sessions (one row per sample) with theirs.
+    strokes drawn in study sessions (one row per sample) and the sessions (one row each) with
+    theirs.
 
     Args:
         target: the store: a SQLite file or a database URL (``postgresql://…``). It must
@@ -513,6 +670,10 @@ def export_trials(target: str | os.PathLike, output: str | os.PathLike, *,
         strokes: the strokes CSV to write (columns :data:`STROKE_COLUMNS`: ``t`` in s since pen
             down, ``x``, ``y`` in mm, ``pressure`` 0–1, tilts in degrees, ``speed`` in mm/s),
             with its own sidecar; None: no strokes.
+        sessions: the sessions CSV to write (columns :data:`SESSION_COLUMNS`; withdrawn
+            sessions too, as records without data), with its own sidecar; None: none.
+        include_pilot: also write the pilot sessions' data; every file then ends with the
+            column :data:`PILOT_COLUMN` (1 for a pilot session, 0 otherwise).
 
     Returns:
         An :class:`ExportSummary`. A store with no study data still gets the header and the
@@ -537,44 +698,70 @@ def export_trials(target: str | os.PathLike, output: str | os.PathLike, *,
     outputs = [output, sidecar_path(output)]
     if strokes is not None:
         outputs += [Path(strokes), sidecar_path(strokes)]
+    if sessions is not None:
+        outputs += [Path(sessions), sidecar_path(sessions)]
     _check_outputs(target, outputs)
     store = _open(target)
+    pilot = (PILOT_COLUMN,) if include_pilot else ()
+    chosen = _Sessions(administered=store.revision not in ("0001", "0002"),
+                       include_pilot=include_pilot)
     try:
         exported_at = datetime.now(UTC).isoformat(timespec="milliseconds")
         with _snapshot(store) as connection, contextlib.ExitStack() as files:
             studies = _studies(connection, store, design)
             ids = [row.id for row in studies]
-            staged = [files.enter_context(atomic_path(path)) for path in outputs]
-            rows = _answer_rows(connection, ids)
-            with _writing(outputs[0]), open(staged[0], "w", newline="", encoding="utf-8") as handle:
+            staged = dict(zip(outputs, (files.enter_context(atomic_path(path))
+                                        for path in outputs), strict=True))
+            rows = _answer_rows(connection, ids, chosen)
+            columns = CSV_COLUMNS + pilot
+            with _writing(output), open(staged[output], "w", newline="",
+                                        encoding="utf-8") as handle:
                 writer = csv.writer(handle)
-                writer.writerow(CSV_COLUMNS)
-                writer.writerows(_csv_row(row) for row in rows)
-            with _writing(outputs[1]):
-                staged[1].write_text(json_text(_trials_sidecar(
-                    connection, store, studies, exported_at, len(rows)), outputs[1]),
-                    encoding="utf-8")
+                writer.writerow(columns)
+                writer.writerows(_csv_row(row, columns) for row in rows)
+            _write_sidecar(staged, sidecar_path(output), _trials_sidecar(
+                connection, store, studies, exported_at, len(rows), chosen))
             stroke_ids, samples = set(), 0
             if strokes is not None:
-                with _writing(outputs[2]), open(staged[2], "w", newline="",
-                                                encoding="utf-8") as handle:
+                path = Path(strokes)
+                with _writing(path), open(staged[path], "w", newline="", encoding="utf-8") as handle:
                     writer = csv.writer(handle)
-                    writer.writerow(STROKE_COLUMNS)
-                    for row in _sample_rows(connection, ids):
-                        writer.writerow(["" if value is None else value for value in row])
+                    writer.writerow(STROKE_COLUMNS + pilot)
+                    for row in _sample_rows(connection, ids, chosen):
+                        values = ["" if value is None else value for value in row]
+                        if include_pilot:
+                            values[-1] = int(bool(values[-1]))
+                        writer.writerow(values)
                         stroke_ids.add(row[2])
                         samples += 1
-                with _writing(outputs[3]):
-                    staged[3].write_text(json_text(_strokes_sidecar(
-                        store, studies, exported_at, len(stroke_ids), samples), outputs[3]),
-                        encoding="utf-8")
+                _write_sidecar(staged, sidecar_path(path), _strokes_sidecar(
+                    store, studies, exported_at, len(stroke_ids), samples, chosen))
+            session_rows = 0
+            if sessions is not None:
+                path = Path(sessions)
+                found = _session_rows(connection, ids, chosen)
+                with _writing(path), open(staged[path], "w", newline="", encoding="utf-8") as handle:
+                    writer = csv.writer(handle)
+                    writer.writerow(SESSION_COLUMNS + pilot)
+                    writer.writerows(_session_csv_row(row, SESSION_COLUMNS + pilot)
+                                     for row in found)
+                session_rows = len(found)
+                _write_sidecar(staged, sidecar_path(path), _sessions_sidecar(
+                    store, studies, exported_at, session_rows, chosen))
         return ExportSummary(rows=len(rows), sessions=len({row["session"] for row in rows}),
                              participants=len({(row["study"], row["participant"]) for row in rows}),
-                             strokes=len(stroke_ids), samples=samples, paths=tuple(outputs))
+                             strokes=len(stroke_ids), samples=samples, paths=tuple(outputs),
+                             session_rows=session_rows)
     except SQLAlchemyError as error:  # a damaged store, not a RealPen store, a lost connection
         raise fail(store.display, f"cannot read the store ({_first_line(error)})") from None
     finally:
         store.close()
+
+
+def _write_sidecar(staged: dict[Path, Path], path: Path, data: dict[str, Any]) -> None:
+    """Write a sidecar's data to its staged file (errors name the sidecar)."""
+    with _writing(path):
+        staged[path].write_text(json_text(data, path), encoding="utf-8")
 
 
 @contextlib.contextmanager

@@ -32,24 +32,36 @@ from typing import Any
 
 from sqlalchemy import Connection, and_, case, func, insert, select, text, update
 
+from realpen.defaults import MODALITIES
 from realpen.errors import RealPenError
 from realpen.study.design import Design
 from realpen.study.plan import PlannedTrial, participant_plan
-from realpen.study.tables import SESSION_STATES, answers, participants, sessions, studies, trials
+from realpen.study.tables import (
+    ENDED_STATES,
+    HOLDS_PLAN_ROW,
+    SESSION_STATES,
+    answers,
+    participants,
+    sessions,
+    studies,
+    trials,
+)
 
 __all__ = ["StudyError", "StudyNotFound", "StudyConflict", "StudyInvalid", "StudyUnavailable",
            "storable", "SessionRequest", "DesignCache", "LIVE_MODALITY", "MAX_RT_MS",
            "MAX_CODE_CHARS", "open_session", "next_trial", "answer_trial", "progress",
            "list_sessions", "set_state", "trial_plan", "trial_exists", "trial_answered", "pen_profile",
-           "design_summary", "now"]
+           "pen_label",
+           "design_summary", "now", "SETTABLE_STATES"]
 
-# The study modality names are the statistics' (``audio-tactile``); the live page's WebSocket
-# protocol calls the same output ``auditory-tactile``.
-LIVE_MODALITY = {"tactile": "tactile", "auditory": "auditory", "audio-tactile": "auditory-tactile",
-                 "none": "none"}
+# The live page's WebSocket protocol names the modalities as designs do (``audio-tactile``); the
+# map stays for callers that translated a design's modality into the page's.
+LIVE_MODALITY = {name: name for name in MODALITIES}
 MAX_RT_MS = 24 * 3600 * 1000.0  # a response time beyond a day is a clock error, not an answer
 MAX_CODE_CHARS = 64
 MAX_SITE_CHARS = 200
+SETTABLE_STATES = tuple(state for state in SESSION_STATES if state != "withdrawn")
+"""The states :func:`set_state` sets; ``withdrawn`` is :func:`realpen.study.admin.withdraw`'s."""
 
 
 def storable(text: str) -> bool:
@@ -110,8 +122,11 @@ class SessionRequest:
         site: where the session runs (a lab's name), for multi-site studies.
         demographics: ``age`` (years), ``gender``, ``handedness``; each may be missing.
         consent: whether the participant gave consent (required when the design asks for it).
-        index: the plan row (0-based); None: the lowest one no session of the study uses.
+        index: the plan row (0-based); None: the lowest one no session of the study holds.
         seed: the plan's seed; None: the design's.
+        pilot: a pilot session (trying the study out): it runs the plan of ``index`` (by
+            default the row the next participant would get) without holding the row, and
+            exports and statistics leave it out unless asked.
     """
 
     participant: str
@@ -120,6 +135,7 @@ class SessionRequest:
     consent: bool = False
     index: int | None = None
     seed: int | None = None
+    pilot: bool = False
 
     def __post_init__(self) -> None:
         code = self.participant
@@ -193,16 +209,18 @@ def _design_key(name: str) -> int:
 
 
 def _used_rows(conn: Connection, name: str) -> set[int]:
-    """The plan rows the sessions of a design (any version of it) use."""
+    """The plan rows the sessions of a design (any version of it) hold: a pilot session and a
+    withdrawn one hold none (:data:`~realpen.study.tables.HOLDS_PLAN_ROW`)."""
     return set(conn.execute(select(sessions.c.plan_index).join(studies).where(
-        studies.c.name == name)).scalars())
+        studies.c.name == name, text(HOLDS_PLAN_ROW))).scalars())
 
 
 def _existing_session(conn: Connection, name: str, code: str) -> int | None:
     return conn.execute(
         select(sessions.c.id).join(participants, sessions.c.participant_id == participants.c.id)
         .join(studies, sessions.c.study_id == studies.c.id)
-        .where(studies.c.name == name, participants.c.code == code)).scalar()
+        .where(studies.c.name == name, participants.c.code == code,
+               sessions.c.state != "withdrawn")).scalar()
 
 
 def open_session(conn: Connection, design: Design, request: SessionRequest,
@@ -211,12 +229,15 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
 
     A participant is known by the design's name and their ID: asking again returns their session
     (whatever version of the design it was started with), which is how a session resumes.
+    A pilot session (``request.pilot``) runs a plan row without holding it: the first real
+    participant after any number of pilots still gets row 0.
 
     Returns:
         (the session's :func:`progress`, whether it was created now).
 
     Raises:
-        StudyInvalid: missing consent, or a plan row another session of the design uses.
+        StudyInvalid: missing consent, or a plan row another session of the design holds (a
+            pilot may run any row).
     """
     code = request.participant.strip()
     if conn.dialect.name == "postgresql":
@@ -236,7 +257,7 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
         index = next(row for row in range(len(used) + 1) if row not in used)  # the lowest free
     else:
         index = request.index
-        if index in used:
+        if index in used and not request.pilot:
             raise StudyInvalid(f"index: plan row {index} is used by another session of "
                                f"'{design.name}'")
     seed = design.seed if request.seed is None else request.seed
@@ -249,7 +270,8 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
         consent=bool(request.consent), created_at=created).returning(participants.c.id)).scalar_one()
     session_id = conn.execute(insert(sessions).values(
         study_id=study_id, participant_id=participant_id, plan_index=index, seed=seed,
-        site=request.site, state="running", started_at=created).returning(sessions.c.id)).scalar_one()
+        site=request.site, state="running", started_at=created, pilot=request.pilot)
+        .returning(sessions.c.id)).scalar_one()
     conn.execute(insert(trials), [{
         "session_id": session_id, "n": trial.n, "block": trial.block,
         "block_index": trial.block_index, "phase": trial.phase, "condition": trial.condition,
@@ -274,28 +296,62 @@ def _first_unanswered(conn: Connection, session_id: int) -> int | None:
 def _progress_of(row, blocks: list, design: Design, next_n: int | None) -> dict:
     total = sum(block["trials"] for block in blocks)
     answered = sum(block["answered"] for block in blocks)
+    next_n = None if row["state"] in ENDED_STATES else next_n
     return {"session": row["id"], "design": row["design"], "title": design.title,
             "participant": row["code"], "site": row["site"], "index": row["plan_index"],
-            "seed": row["seed"], "state": row["state"], "trials": total, "answered": answered,
-            "next": None if row["state"] == "finished" else next_n,
+            "seed": row["seed"], "state": row["state"], "pilot": bool(row["pilot"]),
+            "trials": total, "answered": answered, "next": next_n,
+            "current": _current_trial(blocks, design, next_n, total),
             "blocks": [{"block": block["block"], "block_index": block["block_index"],
                         "trials": block["trials"], "answered": block["answered"]}
                        for block in blocks],
             "started_at": row["started_at"], "finished_at": row["finished_at"]}
 
 
+def _current_trial(blocks: list, design: Design, next_n: int | None, total: int) -> dict | None:
+    """The trial a running or paused session is at (its first unanswered one), for the
+    operator: where it is in the plan, and its condition, modality and pen (id, label and
+    profile: the console may name them; the participant screen does not). None when the
+    session has no next trial."""
+    if next_n is None:
+        return None
+    block = next((block for block in blocks if block["first_open"] == next_n), None)
+    if block is None:  # no block holds it: cannot happen for a plan the store wrote
+        return None
+    conditions = {condition.id: condition.label for condition in design.conditions}
+    pen = next((pen for pen in design.pens if pen.id == block["pen"]), None)
+    return {"n": next_n, "of": total, "block": block["block"],
+            "block_index": block["block_index"], "block_n": next_n - block["first_n"] + 1,
+            "block_of": block["trials"], "phase": block["phase"],
+            "condition": block["condition"],
+            "condition_label": conditions.get(block["condition"], ""),
+            "modality": block["modality"], "pen": block["pen"],
+            "pen_label": pen.label if pen else "", "profile": pen.profile_ref if pen else ""}
+
+
 def _blocks(conn: Connection, session_ids: list[int]) -> tuple[dict, dict]:
-    """Per session: its blocks' trial and answer counts, and its first unanswered trial."""
-    counts = conn.execute(
+    """Per session: its blocks' trial and answer counts, and its first unanswered trial.
+
+    One query: each block's counts, with the phase, condition, modality and pen of the block's
+    first unanswered trial (``first_open``; joined back to its row), so that a list of sessions
+    shows each one's current trial without a query per session.
+    """
+    counts = (
         select(trials.c.session_id, trials.c.block_index, trials.c.block,
                func.count().label("trials"), func.count(trials.c.answered_at).label("answered"),
+               func.min(trials.c.n).label("first_n"),
                func.min(case((trials.c.answered_at.is_(None), trials.c.n))).label("first_open"))
         .where(trials.c.session_id.in_(session_ids))
-        .group_by(trials.c.session_id, trials.c.block_index, trials.c.block)
-        .order_by(trials.c.session_id, trials.c.block_index)).mappings().all()
+        .group_by(trials.c.session_id, trials.c.block_index, trials.c.block)).subquery()
+    opened = trials.alias("opened")
+    rows = conn.execute(
+        select(counts, opened.c.phase, opened.c.condition, opened.c.modality, opened.c.pen)
+        .outerjoin(opened, and_(opened.c.session_id == counts.c.session_id,
+                                opened.c.n == counts.c.first_open))
+        .order_by(counts.c.session_id, counts.c.block_index)).mappings().all()
     blocks: dict[int, list] = {session_id: [] for session_id in session_ids}
     first_open: dict[int, int | None] = dict.fromkeys(session_ids)
-    for block in counts:
+    for block in rows:
         blocks[block["session_id"]].append(block)
         if block["first_open"] is not None and (first_open[block["session_id"]] is None or
                                                 block["first_open"] < first_open[block["session_id"]]):
@@ -311,6 +367,11 @@ def _session_rows():
 
 def progress(conn: Connection, session_id: int, cache: DesignCache) -> dict:
     """A session's progress: state, trials answered of planned, the next trial, per block.
+
+    ``current`` is the trial a running or paused session is at (None once it has ended):
+    ``n`` of ``of`` trials, its ``block`` (``block_n`` of ``block_of`` in it), ``phase``,
+    ``condition`` (and its label), ``modality`` and ``pen`` (its id, label and profile).
+    ``pilot`` says whether the session was made as a pilot.
 
     Raises:
         StudyNotFound: there is no such session.
@@ -364,9 +425,35 @@ def _planned(plan_json: str) -> PlannedTrial:
 
 
 def pen_profile(design: Design, pen: str) -> str:
-    """The profile the live app plays for a design's pen (its ``profile``, else its id); empty
-    for a trial without a pen."""
+    """The profile the live app plays for a design's pen: its ``profile``, else its id.
+
+    The live page loads the pen by this name; answers, trials and exports keep the pen's id.
+
+    Args:
+        design: the session's design.
+        pen: a pen id of the design, or "" for a trial without a pen.
+
+    Returns:
+        The profile's name (or bundle path) as the design gives it; "" for a trial without a
+        pen.
+
+    Raises:
+        ParameterError: ``pen`` is not a pen of the design.
+    """
     return design.pen(pen).profile_ref if pen else ""
+
+
+def pen_label(design: Design, pen: str) -> str:
+    """How the participant may be shown a design's pen: its ``label``, "" when it has none (the
+    participant screen then names no pen) or for a trial without a pen."""
+    return design.pen(pen).label if pen else ""
+
+
+def _choice_labels(design: Design, choices: list[str]) -> list[str]:
+    """What the participant reads for each choice: a pen's label when the choice is a labelled
+    pen's id, else the choice as the design wrote it."""
+    labels = {pen.id: pen.label for pen in design.pens if pen.label}
+    return [labels.get(choice, choice) for choice in choices]
 
 
 def _question_json(design: Design, question_id: str) -> dict:
@@ -378,6 +465,7 @@ def _question_json(design: Design, question_id: str) -> dict:
         data["anchors"] = {str(point): label for point, label in question.anchors.items()}
     elif question.type == "choice":
         data["choices"] = list(question.choices)
+        data["labels"] = _choice_labels(design, data["choices"])
     return data
 
 
@@ -389,7 +477,7 @@ def next_trial(conn: Connection, session_id: int, cache: DesignCache) -> dict:
         StudyNotFound: there is no such session.
     """
     row = _session_row(conn, session_id)
-    n = None if row["state"] == "finished" else _first_unanswered(conn, session_id)
+    n = None if row["state"] in ENDED_STATES else _first_unanswered(conn, session_id)
     if n is None:
         return {"done": True, "session": session_id, "state": row["state"]}
     design = cache.get(conn, row["study_id"])
@@ -401,7 +489,7 @@ def next_trial(conn: Connection, session_id: int, cache: DesignCache) -> dict:
             "block": plan.block, "block_index": plan.block_index, "phase": plan.phase,
             "condition": plan.condition, "modality": plan.modality,
             "live_modality": LIVE_MODALITY.get(plan.modality, "none"), "pen": plan.pen,
-            "profile": pen_profile(design, plan.pen),
+            "profile": pen_profile(design, plan.pen), "pen_label": pen_label(design, plan.pen),
             "ink": plan.ink, "repetition": plan.repetition, "task": plan.task,
             "writing": plan.writing, "feedback": plan.feedback,
             "tactile_url": f"/api/sessions/{session_id}/trials/{n}/tactile.wav" if tactile else None,
@@ -457,7 +545,8 @@ def answer_trial(conn: Connection, session_id: int, n: int, given: dict, rt_ms: 
     Raises:
         StudyNotFound: no such session or trial.
         StudyConflict: the trial was answered already (``extra`` holds the stored answer), is
-            not the next one (``extra["next"]``), or the session is finished.
+            not the next one (``extra["next"]``), or the session has ended (finished,
+            abandoned, withdrawn).
         StudyInvalid: an invalid answer (the detail names the question) or response time.
     """
     row = _session_row(conn, session_id)
@@ -468,8 +557,8 @@ def answer_trial(conn: Connection, session_id: int, n: int, given: dict, rt_ms: 
     if plan_json.answered_at is not None:
         raise StudyConflict(f"trial {n} of session {session_id} is answered already",
                             **_stored_answer(conn, session_id, n))
-    if row["state"] == "finished":
-        raise StudyConflict(f"session {session_id} is finished")
+    if row["state"] in ENDED_STATES:
+        raise StudyConflict(f"session {session_id} is {row['state']}")
     expected = _first_unanswered(conn, session_id)
     if expected != n:
         # Another server may have answered trial n since it was read above (PostgreSQL reads
@@ -508,25 +597,29 @@ def answer_trial(conn: Connection, session_id: int, n: int, given: dict, rt_ms: 
 
 
 def set_state(conn: Connection, session_id: int, state: str, cache: DesignCache) -> dict:
-    """Pause, resume or finish a session; returns its :func:`progress`.
+    """Pause, resume, finish or abandon a session; returns its :func:`progress`.
 
-    A finished session stays finished: its unanswered trials are not offered again.
+    A session that has ended (finished, abandoned or withdrawn) stays so: its unanswered trials
+    are not offered again. ``abandoned`` ends a session the participant left: its answers so far
+    stay and are exported with that state. Setting the state a session is in changes nothing.
 
     Raises:
         StudyNotFound: no such session.
-        StudyInvalid: an unknown state.
-        StudyConflict: resuming a finished session.
+        StudyInvalid: a state not in :data:`SETTABLE_STATES` (``withdrawn`` is
+            :func:`realpen.study.admin.withdraw`'s).
+        StudyConflict: changing the state of a session that has ended.
     """
-    if state not in SESSION_STATES:
-        raise StudyInvalid(f"state: must be one of {', '.join(SESSION_STATES)}")
+    if state not in SETTABLE_STATES:
+        raise StudyInvalid(f"state: must be one of {', '.join(SETTABLE_STATES)}")
     row = _session_row(conn, session_id)
-    if row["state"] == "finished" and state != "finished":
-        raise StudyConflict(f"session {session_id} is finished and cannot be resumed")
+    if row["state"] in ENDED_STATES and state != row["state"]:
+        raise StudyConflict(f"session {session_id} is {row['state']} and cannot be "
+                            f"{'resumed' if state in ('running', 'paused') else state}")
     if row["state"] != state:
         values = {"state": state}
-        if state == "finished":
+        if state in ENDED_STATES:
             values["finished_at"] = now()
-        # never over a finish another server made meanwhile
+        # never over an end another server made meanwhile
         conn.execute(update(sessions).where(sessions.c.id == session_id,
-                                            sessions.c.state != "finished").values(**values))
+                                            sessions.c.state.not_in(ENDED_STATES)).values(**values))
     return progress(conn, session_id, cache)

@@ -20,7 +20,11 @@ Studies:
 ``participants``  a participant of a study: the ID the operator typed (``code``, e.g. ``P07``),
                   site, demographics and consent;
 ``sessions``      one per study and participant: its plan's index and seed, state
-                  (``running``, ``paused``, ``finished``), site, start and end;
+                  (:data:`SESSION_STATES`), site, start and end, whether it is a ``pilot``
+                  (it runs a plan row without taking it), and when the participant withdrew
+                  (``withdrawn_at``; the session then keeps no data: see
+                  :mod:`realpen.study.admin`). A plan row is held by one session of a study
+                  at most, among those that hold one (:data:`HOLDS_PLAN_ROW`);
 ``trials``        the session's planned trials, written when the session is created (``n``
                   from 1), each with its block, phase, condition, modality, pen, ink and
                   question ids; ``answered_at`` and ``rt_ms`` (ms from the trial's start to
@@ -51,18 +55,25 @@ from sqlalchemy import (
     Text,
     UniqueConstraint,
     false,
+    text,
 )
 
 from realpen.io.limits import MAX_STORED_INT
 from realpen.io.strokes import SAMPLE_FIELDS
 
 __all__ = ["MAX_ID", "metadata", "strokes", "samples", "studies", "participants", "sessions", "trials",
-           "answers", "END_REASONS", "SESSION_STATES", "PHASES"]
+           "answers", "END_REASONS", "SESSION_STATES", "ENDED_STATES", "PHASES",
+           "HOLDS_PLAN_ROW"]
 
 MAX_ID = MAX_STORED_INT
 """The largest id, number or count a store holds (2**31 - 1, on SQLite as on PostgreSQL)."""
 END_REASONS = ("pen_up", "disconnect", "replaced", "shutdown", "crash")
-SESSION_STATES = ("running", "paused", "finished")
+SESSION_STATES = ("running", "paused", "finished", "abandoned", "withdrawn")
+"""A session's states: ``running`` and ``paused`` have a next trial; the others have ended."""
+ENDED_STATES = ("finished", "abandoned", "withdrawn")
+"""The states a session never leaves (it cannot be resumed)."""
+HOLDS_PLAN_ROW = "NOT pilot AND state <> 'withdrawn'"
+"""SQL: a session holds its plan row (neither a pilot nor withdrawn)."""
 PHASES = ("training", "experimental", "questionnaire")
 
 # Constraint names follow one convention so that Alembic migrations can name them on both
@@ -110,8 +121,11 @@ sessions = Table(
     Column("state", Text, nullable=False, server_default="running"),
     Column("started_at", Text, nullable=False),
     Column("finished_at", Text),
+    Column("pilot", Boolean, nullable=False, server_default=false()),
+    Column("withdrawn_at", Text),
     UniqueConstraint("study_id", "participant_id"),
-    UniqueConstraint("study_id", "plan_index"),
+    Index("sessions_by_plan_row", "study_id", "plan_index", unique=True,
+          sqlite_where=text(HOLDS_PLAN_ROW), postgresql_where=text(HOLDS_PLAN_ROW)),
 )
 
 trials = Table(

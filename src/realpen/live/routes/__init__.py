@@ -4,6 +4,7 @@
 - :mod:`~realpen.live.routes.profiles` — the pens offered and their audio;
 - :mod:`~realpen.live.routes.strokes` — the pen-event WebSocket and ``/api/status``;
 - :mod:`~realpen.live.routes.studies` — the study pages and HTTP API;
+- :mod:`~realpen.live.routes.qr` — the participant screen's address as a QR code;
 - :mod:`~realpen.live.routes.device` — the pen device, its command log, the pen patterns;
 - :mod:`~realpen.live.routes.params` — no router: the integer URL parameters (digits only, in a
   range) that the routers share.
@@ -16,9 +17,10 @@ one handler that turns them into HTTP replies (:mod:`realpen.live.errors`).
 
 from __future__ import annotations
 
-from realpen.live.routes import device, pages, profiles, strokes, studies
+from realpen.live.routes import device, pages, profiles, qr, strokes, studies
 
 __all__ = ["ROUTERS"]
 
-ROUTERS = (studies.router, pages.router, profiles.router, device.router, strokes.router)
+ROUTERS = (studies.router, qr.router, pages.router, profiles.router, device.router,
+           strokes.router)
 """Every router, in the order the app includes them."""

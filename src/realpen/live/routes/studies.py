@@ -16,7 +16,8 @@ the store's writer (so its reply is sent only after the commit) and lets a
 ``GET  /api/sessions/{id}``                      one session's progress
 ``GET  /api/sessions/{id}/next``                 the first unanswered trial, or done
 ``POST /api/sessions/{id}/trials/{n}``           answer trial n
-``POST /api/sessions/{id}/state``                pause, resume or finish
+``POST /api/sessions/{id}/state``                pause, resume, finish or abandon
+``POST /api/sessions/{id}/withdraw``             withdraw the participant (their data deleted)
 ``GET  /api/sessions/{id}/trials/{n}/tactile.wav``  the trial's tactile pattern
 """
 
@@ -38,12 +39,14 @@ from realpen.live.catalog import CatalogEntry, playable_wav
 from realpen.live.routes.pages import static_page
 from realpen.live.routes.params import STORED_ID, url_int
 from realpen.live.state import State
+from realpen.study import admin
 from realpen.study import sessions as study
 from realpen.study.db import STORE_ERRORS, error_line
 from realpen.study.design import MAX_ANSWER_CHARS, Design
 from realpen.study.patterns import PatternCache
 
-__all__ = ["router", "load_designs", "SessionBody", "AnswerBody", "StateBody", "REQUEST_WAIT_S"]
+__all__ = ["router", "load_designs", "SessionBody", "AnswerBody", "StateBody", "WithdrawBody",
+           "REQUEST_WAIT_S"]
 
 REQUEST_WAIT_S = 30.0  # a request waits at most this long for the store, then gets 503
 Id = STORED_ID
@@ -59,7 +62,7 @@ class _Body(BaseModel):
 
 class SessionBody(_Body):
     """``POST /api/sessions``: the design by name, the participant's ID, and optionally the
-    site, demographics, consent, plan row and seed."""
+    site, demographics, consent, plan row, seed and whether it is a pilot session."""
 
     design: str = Field(min_length=1, max_length=100)
     participant: str = Field(min_length=1, max_length=study.MAX_CODE_CHARS)
@@ -68,6 +71,7 @@ class SessionBody(_Body):
     consent: bool = False
     index: int | None = Field(None, ge=0, lt=1_000_000)
     seed: int | None = Field(None, ge=0, lt=2**63)
+    pilot: bool = False
 
 
 class AnswerBody(_Body):
@@ -82,7 +86,13 @@ class AnswerBody(_Body):
 class StateBody(_Body):
     """``POST /api/sessions/{id}/state``."""
 
-    state: Literal["running", "paused", "finished"]
+    state: Literal["running", "paused", "finished", "abandoned"]
+
+
+class WithdrawBody(_Body):
+    """``POST /api/sessions/{id}/withdraw``: the participant's ID, typed again to confirm."""
+
+    confirm: str = Field(max_length=study.MAX_CODE_CHARS)
 
 
 def load_designs(paths: list[Path]) -> dict[str, Design]:
@@ -165,7 +175,7 @@ async def open_session(state: State, body: SessionBody) -> JSONResponse:
                                  f"'{missing[0]}', which this server does not offer "
                                  f"(start the server with the folder that holds it)")
     request = study.SessionRequest(body.participant, body.site, dict(body.demographics),
-                                   body.consent, body.index, body.seed)
+                                   body.consent, body.index, body.seed, body.pilot)
     result, created = await _write(state, study.open_session, design, request,
                                    state.design_cache)
     return JSONResponse(result, status_code=201 if created else 200)
@@ -197,6 +207,12 @@ async def answer(state: State, session_id: Id, n: Id, body: AnswerBody) -> Respo
 @router.post("/api/sessions/{session_id}/state")
 async def session_state(state: State, session_id: Id, body: StateBody) -> Response:
     return JSONResponse(await _write(state, study.set_state, session_id, body.state,
+                                     state.design_cache))
+
+
+@router.post("/api/sessions/{session_id}/withdraw")
+async def withdraw(state: State, session_id: Id, body: WithdrawBody) -> Response:
+    return JSONResponse(await _write(state, admin.withdraw, session_id, body.confirm,
                                      state.design_cache))
 
 
