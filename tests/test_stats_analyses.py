@@ -110,10 +110,10 @@ def test_study1_splits_the_conditions_and_names_the_friedman_variant(study1_csv,
 
 def test_study1_posthoc_pairs_are_all_fifteen_with_holm(study1):
     pairs = rows(study1.results, analysis="wilcoxon/condition", outcome="Q1")
-    assert len(pairs) == 15 and "D-F" in set(pairs["effect"])
+    assert len(pairs) == 15 and "D vs F" in set(pairs["effect"])
     assert (pairs["adjust"] == "holm").all()
     paper = study1.paper
-    assert set(paper["effect"]) >= {"D-F", "B-E", "C-F", "A-D"}
+    assert set(paper["effect"]) >= {"D vs F", "B vs E", "C vs F", "A vs D"}
 
 
 def test_study1_cells_are_per_condition_with_intervals(study1):

@@ -152,7 +152,7 @@ def test_pairwise_golden(golden, anova_2x3):
     reference = golden["rm_anova_2x3"]["expected"]["B_pairwise_bonferroni_p"]
     table = pairwise(anova_2x3, dv="DV", within="B", subject="id", adjust="bonferroni",
                      average_over=["A"]).set_index("effect")
-    for effect, key in (("a-b", "a_vs_b"), ("a-c", "a_vs_c"), ("b-c", "b_vs_c")):
+    for effect, key in (("a vs b", "a_vs_b"), ("a vs c", "a_vs_c"), ("b vs c", "b_vs_c")):
         assert near(table.loc[effect, "p_adjusted"], reference[key])
     assert (table["adjust"] == "bonferroni").all() and (table["df1"] == 7).all()
 
@@ -183,7 +183,7 @@ def test_wilcoxon_long_pairs_by_subject():
     data = pd.DataFrame({"s": [3, 1, 2, 1, 2, 3, 4, 4], "c": ["F", "D", "D", "F", "F", "D", "D", "F"],
                          "y": [5, 2, 3, 4, 5, 2, 3, 4]})
     row = wilcoxon_long(data, dv="y", within="c", subject="s", a="D", b="F", method="r").iloc[0]
-    assert row["effect"] == "D-F" and row["w_plus"] == 0 and row["n"] == 4
+    assert row["effect"] == "D vs F" and row["w_plus"] == 0 and row["n"] == 4
 
 
 def test_contrast_fallback_agrees_with_pingouin(anova_2x3):
@@ -290,7 +290,7 @@ def test_pairwise_holm_never_above_bonferroni():
     data["y"] = rng.normal(size=len(data)) + data["c"].map({"A": 0, "B": 0.5, "C": 1, "D": 1.5})
     holm = pairwise(data, dv="y", within="c", subject="s", adjust="holm")
     bonferroni = pairwise(data, dv="y", within="c", subject="s", adjust="bonferroni")
-    assert len(holm) == 6 and list(holm["effect"])[:3] == ["A-B", "A-C", "A-D"]
+    assert len(holm) == 6 and list(holm["effect"])[:3] == ["A vs B", "A vs C", "A vs D"]
     assert (holm["p_adjusted"] <= bonferroni["p_adjusted"] + 1e-15).all()
     assert (holm["p_adjusted"] >= holm["p"]).all() and (holm["p_adjusted"] < bonferroni["p_adjusted"]).any()
     ranks = pairwise(data, dv="y", within="c", subject="s", test="wilcoxon", adjust="none")
@@ -329,7 +329,7 @@ def test_degenerate_data_give_nan_with_a_reason_not_noise():
     assert math.isnan(row["statistic"]) and "tied" in row["method"]
     table = pairwise(flat.assign(y=flat["y"] + (flat["c"] == "C") * np.arange(12.0)), dv="y", within="c",
                      subject="s", test="wilcoxon").set_index("effect")
-    assert math.isnan(table.loc["A-B", "p_adjusted"]) and table.loc["A-C", "p_adjusted"] == 0.25
+    assert math.isnan(table.loc["A vs B", "p_adjusted"]) and table.loc["A vs C", "p_adjusted"] == 0.25
 
 
 # --- refusals: one line each, naming the thing ------------------------------------------------

@@ -215,7 +215,7 @@ ANALYSES = {"study1": lambda: lean(study1_analysis(4), "Q2"),
             "generic": generic_analysis}
 EXPECTED = {
     "study1": ["figure7", "participants-Q1", "power"],
-    "study2": ["figure10", "figure11", "figure12", "participants-recognition",
+    "study2": ["figure10", "recognition", "figure11", "figure12", "participants-recognition",
                "participants-log_rt", "participants-balance"],
     "generic": ["means-score", "participants-score"],
 }
@@ -305,6 +305,23 @@ def test_figure10_shows_count_and_row_percent_on_one_scale():
     assert "30\n60 %" in texts  # tactile, pencil answered pencil: 30 of 50
 
 
+def test_an_outcome_without_a_factor_is_titled_without_its_one_level():
+    # Balance asked in one modality only: the analysis gives it no factor ("all").
+    people = people_of("balance", "all", ["all"], ["S1", "S2", "S3"],
+                       np.array([[3.0], [4.0], [5.0]]), "points")
+    empty = pd.DataFrame()
+    analysis = StudyAnalysis("study2", "t", empty, cells_of(people, "points"), people, empty,
+                             empty)
+    (title,) = [ax.get_title() for ax in study_figures.participants_figure(analysis,
+                                                                           "balance").axes]
+    assert "all" not in title and title.startswith("balance") and "each participant" in title
+    people["factor"], people["level"] = "modality", "audio-tactile"
+    analysis.participants = people
+    (title,) = [ax.get_title() for ax in study_figures.participants_figure(analysis,
+                                                                           "balance").axes]
+    assert "(modality audio-tactile only)" in title
+
+
 def test_missing_tables_are_one_clear_error():
     empty = pd.DataFrame()
     analysis = StudyAnalysis("study2", "t", empty, empty, empty, empty, empty)
@@ -367,8 +384,11 @@ def test_report_marks_paper_compatible_rows_with_the_reason(rendered):
     text = html_of(rendered, "study1")
     marked = re.findall(r'<tr class="paper-compatible">.*?</tr>', text, flags=re.S)
     assert len(marked) == 1
-    assert 'class="badge"' in marked[0] and "ties make it anti-conservative" in marked[0]
-    assert "B-E" in marked[0]
+    assert 'class="badge"' in marked[0] and "B-E" in marked[0]
+    # The reason is given once, in the method the row refers to.
+    number = re.search(r'href="#method-(\d+)"', marked[0]).group(1)
+    listed = re.search(rf'<li id="method-{number}">(.*?)</li>', text, flags=re.S).group(1)
+    assert 'class="badge"' in listed and "ties make it anti-conservative" in listed
     assert len(re.findall(r'<tr class="paper-compatible">', html_of(rendered, "study2"))) == 1
 
 

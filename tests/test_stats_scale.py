@@ -266,7 +266,7 @@ def test_simulate_store_on_a_disk_that_fills_part_way_is_one_line(tmp_path, monk
     empty = tmp_path / "empty.sqlite3"
     open_database(empty, create=True).close()
     with sqlite3.connect(empty) as db:
-        room = db.execute("PRAGMA page_count").fetchone()[0] + 3  # a few pages of answers
+        room = db.execute("PRAGMA page_count").fetchone()[0] + 2  # a page or two of answers
     db.close()
     answered = []
     answer_trial = sessions.answer_trial
@@ -286,7 +286,7 @@ def test_simulate_store_on_a_disk_that_fills_part_way_is_one_line(tmp_path, monk
     store, output = folder / "sim.sqlite3", folder / "sim.csv"
     event.listen(Engine, "connect", little_room)
     try:
-        result = run_cli("stats", "simulate", "study1", "-n", "4", "--store", str(store),
+        result = run_cli("stats", "simulate", "study1", "-n", "12", "--store", str(store),
                          "-o", str(output))
     finally:
         event.remove(Engine, "connect", little_room)

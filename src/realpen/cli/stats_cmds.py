@@ -108,6 +108,11 @@ def report(
         False, "--exclude-incomplete",
         help="Leave participants out of the outcomes whose planned cells they miss (listed in "
              "the report); without it they are refused."),
+    include_pilot: bool = typer.Option(
+        False, "--include-pilot",
+        help="Analyse the pilot sessions' answers too (rows whose pilot column is 1, which "
+             "`realpen study export --include-pilot` writes); without it they are left out and "
+             "counted in the report."),
     power_sims: int = typer.Option(
         200, "--power-sims", callback=_power_sims,
         help="Simulated studies per step of the smallest-detectable-effect search in the "
@@ -139,7 +144,8 @@ def report(
     with terminate_as_interrupt():
         with working("analysing"):
             try:
-                analysis = analyse(read_trials(trials, loaded), options)
+                analysis = analyse(read_trials(trials, loaded, include_pilot=include_pilot),
+                                   options)
             except IncompleteError as error:
                 raise RealPenError(f"{error}; rerun with --exclude-incomplete to leave incomplete "
                                    f"participants out of the outcomes they miss") from None

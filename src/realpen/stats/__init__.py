@@ -17,6 +17,10 @@ library function that does its work (scipy.stats, statsmodels, pingouin).
 - :mod:`~realpen.stats.intervals` — t and bootstrap confidence intervals;
 - :mod:`~realpen.stats.data` — reading and checking a trials CSV, a design's outcomes, each
   participant's cell values;
+- :mod:`~realpen.stats.chance` — recognition against chance (each participant's proportion
+  correct, and the pooled trials);
+- :mod:`~realpen.stats.trial_models` — trial-level models beside the participant-level tests
+  (a binomial GEE for recognition, a linear mixed model for log response times);
 - :mod:`~realpen.stats.analyses` — the analyses of a design (study 1, study 2, any other),
   with the paper's own choices beside them (``paper_compatible``);
 - :mod:`~realpen.stats.paper`, :mod:`~realpen.stats.texts` — the paper's numbers, the

@@ -5,15 +5,22 @@ Every design gets the within-subject analysis of its outcomes (:func:`realpen.st
 
 - a **Likert** outcome: a Friedman test per factor (on each participant's mean over the other
   factors), Wilcoxon signed-rank tests of every pair of levels (p by the named method,
-  adjusted over the pairs), and with two factors the aligned rank transform for their
-  interaction. When the conditions are a full factorial of tactile counts (study 1: 5, 10 or
-  15 principal frequencies × 15 sub-patterns or one), the conditions are also split into
+  adjusted over the pairs) — a factor of two levels gets the Wilcoxon signed-rank test of its
+  pair only (a Friedman test of two levels is a sign test) — and with two factors the aligned
+  rank transform for their interaction. When the conditions are a full factorial of tactile
+  counts (study 1: 5, 10 or 15 principal frequencies × 15 sub-patterns or one), the
+  conditions are also split into
   ``superposition`` and ``fluctuation``, each tested "blocked by" the other in the named
   variant (:data:`FRIEDMAN_VARIANTS`);
+- the factors are the design's (:func:`realpen.stats.data.outcomes`: crossed, nested in another
+  or constant), and the methods say which each outcome has;
 - **recognition** (the proportion of right answers per participant and cell) and **log_rt**
   (the mean of ln RT per participant and cell): a repeated-measures ANOVA over the factors
   with Mauchly's test and Greenhouse–Geisser rows, and Bonferroni-adjusted paired t-tests per
-  factor, as the paper did — but with participants, not repetitions, as subjects.
+  factor, as the paper did — but with participants, not repetitions, as subjects; beside them
+  a trial-level model (:mod:`realpen.stats.trial_models`: a binomial GEE, a linear mixed model
+  of log RT) as the check that uses every trial, and for recognition the rate against chance
+  per level of each factor (:mod:`realpen.stats.chance`).
 
 ``--paper-compatible`` adds the paper's own choices beside these, each row's ``method``
 starting with ``paper-compatible:`` and saying why it is not recommended.
@@ -31,13 +38,23 @@ import pandas as pd
 from realpen.errors import ParameterError, RealPenError, fail
 from realpen.stats.anova import pairwise, rm_anova
 from realpen.stats.art import aligned_rank_transform
-from realpen.stats.data import Outcome, Trials, cell_values, outcomes
+from realpen.stats.chance import recognition_chance
+from realpen.stats.data import (
+    ANSWER_KEY,
+    Outcome,
+    Trials,
+    cell_values,
+    factor_text,
+    outcome_rows,
+    outcomes,
+)
 from realpen.stats.intervals import cell_cis
 from realpen.stats.nonparametric import friedman
 from realpen.stats.outcome import CELL_COLUMNS, CONFUSION_COLUMNS, PARTICIPANT_COLUMNS, StudyAnalysis
 from realpen.stats.paper import paper_numbers
 from realpen.stats.results import RESULT_COLUMNS, with_context
 from realpen.stats.texts import methods_paragraphs
+from realpen.stats.trial_models import trial_model_tests
 
 __all__ = ["AnalysisOptions", "analyse", "IncompleteError", "FRIEDMAN_VARIANTS",
            "WILCOXON_METHODS", "ADJUSTMENTS", "CI_METHODS", "SUPERPOSITION", "FLUCTUATION"]
@@ -59,6 +76,9 @@ FLUCTUATION = "fluctuation"
 _PAPER_WILCOXON = ("paper-compatible: SPSS-style p (normal approximation without continuity "
                    "correction), as the paper's SPSS analysis; not recommended: with a dozen "
                    "tied Likert pairs the normal approximation is poor, use the exact p")
+_TWO_LEVELS = ("two levels: the Wilcoxon signed-rank test of the pair is the test of the factor "
+               "(a Friedman test of two levels is a sign test, which ignores the size of the "
+               "differences)")
 _PAPER_PSEUDO = ("paper-compatible: the repetitions of each participant treated as separate "
                  "subjects ({subjects} pseudo-subjects), which the paper's degrees of freedom "
                  "imply; not recommended: repetitions of one person are not independent, so "
@@ -134,7 +154,7 @@ def analyse(trials: Trials, options: AnalysisOptions = AnalysisOptions()) -> Stu
     parts: list[pd.DataFrame] = []
     cells: list[pd.DataFrame] = []
     lines: list[pd.DataFrame] = []
-    notes: list[str] = []
+    notes: list[str] = list(trials.notes)
     kept: dict[str, list[str]] = {}
     factorial = _tactile_factorial(design)
     for outcome in found:
@@ -157,6 +177,10 @@ def analyse(trials: Trials, options: AnalysisOptions = AnalysisOptions()) -> Stu
             parts.extend(_likert_tests(outcome, frame, options, factorial, notes))
         else:
             parts.extend(_anova_tests(outcome, frame, notes))
+            parts.extend(recognition_chance(trials, outcome, kept[outcome.name],
+                                            wilcoxon_method=options.wilcoxon_method,
+                                            adjust=options.adjust))
+            parts.extend(trial_model_tests(trials, outcome, kept[outcome.name], notes))
     if options.paper_compatible:
         parts.extend(_paper_pseudo_replication(trials, found, kept))
     results = (pd.concat(parts, ignore_index=True) if parts
@@ -173,16 +197,27 @@ def analyse(trials: Trials, options: AnalysisOptions = AnalysisOptions()) -> Stu
                   + ", ".join(o.name for o in found if p in missing[o.name]) + ")"
                   for p, reasons in incomplete.items()},
         notes=notes, options=asdict(options), source=trials.source)
-    analysis.paper = paper_numbers(analysis)
+    analysis.paper = paper_numbers(analysis, trials)
     everyone = [p for p in trials.participants if p not in incomplete]
     analysis.methods = methods_paragraphs(analysis, trials, found, everyone, factorial is not None)
+    analysis.methods.insert(min(1, len(analysis.methods)), _factors_paragraph(found))
     return analysis
+
+
+def _factors_paragraph(found: list[Outcome]) -> str:
+    """The factors found in the design for each outcome and how each is treated."""
+    return ("Factors, from the cells the design plans for each outcome (crossed: every "
+            "combination planned; nested: one factor's level fixes the other's, which is then "
+            "not a factor of its own; constant: one level). "
+            + " ".join(f"{factor_text(outcome)}." for outcome in found
+                       if outcome.kind != "log_rt"))
 
 
 def _note_zero_times(trials: Trials, outcome: Outcome, kept: list[str], notes: list[str]) -> None:
     rows = trials.frame[(trials.frame["question"] == outcome.question)
                         & trials.frame["participant"].isin(kept)]
-    zero = rows.drop_duplicates(["participant", "trial"])["rt_ms"].eq(0).sum()
+    # A trial's number may repeat in other blocks (other software numbers trials per block).
+    zero = rows.drop_duplicates([c for c in ANSWER_KEY if c != "question"])["rt_ms"].eq(0).sum()
     if zero:
         notes.append(f"{outcome.name}: {zero} response time{'s' if zero != 1 else ''} of 0 ms "
                      f"left out (no logarithm)")
@@ -274,6 +309,13 @@ def _likert_tests(outcome: Outcome, frame: pd.DataFrame, options: AnalysisOption
             continue
         others = [f for f in factors if f != factor]
         averaged = f"; values averaged over {', '.join(others)}" if others else ""
+        if means[factor].nunique() == 2:
+            # Two levels: the Friedman test is a sign test of the pair; the signed-rank test
+            # also weighs the size of each participant's difference.
+            parts.extend(_wilcoxon_pairs(outcome, means, factor, options, notes,
+                                         paper=factor == "condition",
+                                         reason=_TWO_LEVELS + averaged))
+            continue
         result = friedman(means, dv="value", within=factor, subject="participant")
         result["method"] = result["method"] + averaged
         parts.append(with_context(result, analysis=f"friedman/{factor}", outcome=outcome.name,
@@ -318,7 +360,10 @@ def _checked(art: pd.DataFrame) -> pd.DataFrame:
 
 
 def _wilcoxon_pairs(outcome: Outcome, means: pd.DataFrame, factor: str, options: AnalysisOptions,
-                    notes: list[str], *, paper: bool) -> list[pd.DataFrame]:
+                    notes: list[str], *, paper: bool, reason: str = "") -> list[pd.DataFrame]:
+    """Wilcoxon signed-rank tests of every pair of ``factor``'s levels (``reason``, why these
+    are the factor's test, appended to each row's method), and the paper's SPSS-style p beside
+    them when asked."""
     parts = []
     methods = [(options.wilcoxon_method, "")]
     if options.paper_compatible and paper:
@@ -332,6 +377,8 @@ def _wilcoxon_pairs(outcome: Outcome, means: pd.DataFrame, factor: str, options:
                          f"p-values depend on the method (here '{method}')")
         if mark:
             pairs["method"] = mark + "; " + pairs["method"]
+        elif reason:
+            pairs["method"] = pairs["method"] + "; " + reason
         analysis = f"wilcoxon/{factor}" + ("/paper-compatible" if mark else "")
         parts.append(with_context(pairs, analysis=analysis, outcome=outcome.name,
                                   p_adjusted=pairs["p_adjusted"],
@@ -446,10 +493,10 @@ def _paper_pseudo_replication(trials: Trials, found: list[Outcome], kept: dict[s
     for outcome in found:
         if outcome.kind != "recognition" or not outcome.factors:
             continue
-        rows = trials.frame[(trials.frame["question"] == outcome.question)
-                            & trials.frame["correct"].notna()
-                            & trials.frame["participant"].isin(kept[outcome.name])]
-        rows = rows.sort_values(["participant", "trial"], kind="stable")
+        rows = outcome_rows(trials, outcome)
+        rows = rows[rows["correct"].notna() & rows["participant"].isin(kept[outcome.name])]
+        # The session's order is the file's (trial numbers may restart in every block).
+        rows = rows.sort_values(["participant", "line"], kind="stable")
         factors = list(outcome.factors)
         repetition = rows.groupby(["participant", *factors], sort=False).cumcount() + 1
         pseudo = rows.assign(subject=rows["participant"].astype(str) + "#" + repetition.astype(str),

@@ -32,7 +32,7 @@ from realpen.errors import ParameterError
 from realpen.stats.contrasts import ZERO_FRACTION, anovarm_f, contrast_anova, effect_name, effects
 from realpen.stats.long import MAX_FACTORS, balanced_wide, factor_list, safe_long
 from realpen.stats.nonparametric import WILCOXON_METHODS, wilcoxon
-from realpen.stats.results import TEST_COLUMNS, tidy
+from realpen.stats.results import TEST_COLUMNS, pair_label, tidy
 from realpen.stats.results import test_row as _result_row  # pytest would collect "test_row"
 
 __all__ = ["rm_anova", "rm_anova_table", "effect_row", "pairwise", "SPHERICITY_ALPHA", "ADJUSTMENTS",
@@ -288,7 +288,8 @@ def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: st
         average_over: the other within factors, averaged within each subject.
 
     Returns:
-        One row per pair: :data:`TEST_COLUMNS`, then ``effect`` (``"a-b"``), ``a``, ``b``,
+        One row per pair: :data:`TEST_COLUMNS`, then ``effect`` (``"a vs b"``:
+        :func:`realpen.stats.results.pair_label`), ``a``, ``b``,
         ``p_adjusted``, ``adjust``, then the test's own columns (``mean_diff``, the mean of
         a − b, for t; the Wilcoxon columns for Wilcoxon). The statistic's sign is that of a − b.
 
@@ -309,9 +310,9 @@ def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: st
         >>> table = pairwise(data, dv="score", within="pen", subject="subject", adjust="bonferroni")
         >>> for row in table.itertuples():
         ...     print(f"{row.effect}: t = {row.statistic:.2f}, p_bonferroni = {row.p_adjusted:.3f}")
-        a-b: t = -3.00, p_bonferroni = 0.173
-        a-c: t = -8.66, p_bonferroni = 0.010
-        b-c: t = -2.45, p_bonferroni = 0.275
+        a vs b: t = -3.00, p_bonferroni = 0.173
+        a vs c: t = -8.66, p_bonferroni = 0.010
+        b vs c: t = -2.45, p_bonferroni = 0.275
     """
     if not isinstance(within, str):
         raise ParameterError("within", f"must be one column name, got {within!r}")
@@ -331,7 +332,7 @@ def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: st
     rows = []
     for a, b in pairs:
         x, y = means[a].to_numpy(), means[b].to_numpy()
-        name = f"{a}-{b}"
+        name = pair_label(a, b)
         diff = x - y
         if test == "t":
             with warnings.catch_warnings(), np.errstate(divide="ignore", invalid="ignore"):

@@ -18,12 +18,13 @@ import pandas as pd
 
 from realpen.display.charts import label_text
 from realpen.errors import ParameterError
-from realpen.stats.data import LOG_RT
+from realpen.stats.data import LOG_RT, RECOGNITION
 
 __all__ = ["LIKERT_UNIT", "LIKERT_JITTER", "KNOWN_ORDERS", "QUESTIONNAIRE", "STUDY1_LABELS",
-           "RT_OUTCOME", "require_table", "cell_table", "participant_table", "ordered_levels",
-           "outcome_names", "cell_rows", "participant_matrix", "outcome_unit", "outcome_label",
-           "axis_label", "main_factor", "no_data"]
+           "RT_OUTCOME", "RECOGNITION_OUTCOME", "require_table", "cell_table",
+           "participant_table", "ordered_levels", "outcome_names", "cell_rows",
+           "participant_matrix", "outcome_unit", "outcome_label", "axis_label", "main_factor",
+           "chance_line", "no_data"]
 
 LIKERT_JITTER = 0.12
 """Likert answers tie a lot: each participant's line is shifted by a fixed amount within
@@ -45,6 +46,8 @@ STUDY1_LABELS = {"Q1": "Q1: realism", "Q2": "Q2: comfort"}
 """How study 1's Likert outcomes are named on a figure."""
 RT_OUTCOME = LOG_RT
 """The response-time outcome (its cells are in ms: geometric means)."""
+RECOGNITION_OUTCOME = RECOGNITION
+"""The recognition outcome (its cells are in % correct)."""
 
 
 def require_table(frame: pd.DataFrame | None, columns: Iterable[str], table: str) -> pd.DataFrame:
@@ -175,6 +178,33 @@ def main_factor(participants: pd.DataFrame, outcome: str) -> str:
         return "condition"
     single = [name for name in factors if ":" not in name] or factors
     return max(single, key=lambda name: rows.loc[rows["factor"] == name, "level"].nunique())
+
+
+def chance_line(analysis) -> tuple[float, str] | None:
+    """Where guessing puts the recognition rate: ``(percent, "1/k")`` for a question of ``k``
+    answers, or None without a confusion table.
+
+    ``k`` is the number of answers the ``confusion`` table lists, which holds every pen
+    presented and every other answer given (a choice that is not a pen and that nobody chose
+    is not counted; with the usual ``choices: pens``, and in study 2, it is exact).
+
+    Examples:
+        >>> import pandas as pd
+        >>> from realpen.stats.outcome import StudyAnalysis
+        >>> confusion = pd.DataFrame({"modality": "tactile", "pen": ["pencil"] * 3,
+        ...                           "chosen": ["pencil", "ballpoint", "marker"],
+        ...                           "count": [3, 1, 0], "row_percent": [75.0, 25.0, 0.0]})
+        >>> empty = pd.DataFrame()
+        >>> chance_line(StudyAnalysis("study2", "Study 2", empty, empty, empty, confusion, empty))
+        (33.333333333333336, '1/3')
+    """
+    confusion = getattr(analysis, "confusion", None)
+    if not isinstance(confusion, pd.DataFrame) or "chosen" not in confusion.columns:
+        return None
+    answers = confusion["chosen"].astype(str).nunique()
+    if answers < 2:
+        return None
+    return 100.0 / answers, f"1/{answers}"
 
 
 def no_data(what: str, figure_name: str) -> ParameterError:

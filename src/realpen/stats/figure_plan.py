@@ -1,11 +1,11 @@
 """Which figures a study analysis gets, their file names and captions, and writing them all.
 
 :func:`study_figure_names` lists every figure that applies to an analysis (the paper's Figures
-7, 10, 11 and 12 for the built-in studies; means, confusion and response times for another
-design; each participant's own data; the power plot), :func:`figure_caption` words each one
-for the report (:func:`figure_captions`: all of them at once), and :func:`save_study_figures`
-draws them (:mod:`realpen.stats.figures`, :mod:`realpen.stats.power_plot`) and writes them as
-PNG (150 dpi) and SVG, all or nothing.
+7, 10, 11 and 12 for the built-in studies, and recognition per modality against chance; means,
+confusion and response times for another design; each participant's own data; the power
+plot), :func:`figure_caption` words each one for the report (:func:`figure_captions`: all of
+them at once), and :func:`save_study_figures` draws them (:mod:`realpen.stats.figures`,
+:mod:`realpen.stats.power_plot`) and writes them as PNG (150 dpi) and SVG, all or nothing.
 
 May import: :mod:`realpen.errors`, :mod:`realpen.io`, :mod:`realpen.display` and the figure
 modules of :mod:`realpen.stats` (and pandas).
@@ -28,8 +28,10 @@ from realpen.stats.figure_data import (
     LIKERT_JITTER,
     LIKERT_UNIT,
     QUESTIONNAIRE,
+    RECOGNITION_OUTCOME,
     RT_OUTCOME,
     cell_table,
+    chance_line,
     main_factor,
     outcome_label,
     outcome_names,
@@ -43,6 +45,7 @@ from realpen.stats.figures import (
     figure12,
     means_figure,
     participants_figure,
+    recognition_figure,
 )
 from realpen.stats.power_plot import has_power_figure, power_figure, split_power
 
@@ -57,8 +60,9 @@ def study_figure_names(analysis) -> list[str]:
     """The names (file stems) of every figure that applies to ``analysis``, in report order.
 
     For the paper's designs (study1, study2): ``figure7`` (Likert outcomes over
-    ``condition``), ``figure10`` (a confusion table), ``figure11`` (``log_rt`` over
-    ``modality:pen``), ``figure12`` (Likert outcomes over ``modality``). For any other design:
+    ``condition``), ``figure10`` (a confusion table), ``recognition`` (recognition per
+    modality with the chance line), ``figure11`` (``log_rt`` over ``modality:pen``),
+    ``figure12`` (Likert outcomes over ``modality``). For any other design:
     ``confusion`` and ``response-times`` (the same drawings without the paper's numbers) and
     ``means-<outcome>`` (one per outcome). For all: ``participants-<outcome>`` (one per outcome
     with participant values) and ``power``.
@@ -155,13 +159,25 @@ def _figure_plan(analysis) -> list[tuple[str, object, str]]:
                          f"Figure 7. {', '.join(outcome_label(analysis, o) for o in likert)}: "
                          f"mean rating per condition with its {_ci_words(cells, likert)}; "
                          + _lines_words(people(likert), shift)))
+    chance = chance_line(analysis)
+    # "1/3, guessing among 3 answers": the fraction and where it comes from.
+    chance_words = (f"chance ({chance[1]}, guessing among {chance[1].split('/')[1]} answers)"
+                    if chance is not None else "")
     if analysis.confusion is not None and len(analysis.confusion):
         plan.append(("figure10" if paper else "confusion", lambda: figure10(analysis),
                      ("Figure 10. " if paper else "")
                      + "Confusion matrix per modality: rows the pen presented, columns "
                      "the pen chosen; each cell gives the count of answers and its percentage "
                      "of the row (the colour, on one scale for all panels); outlined: correct "
-                     "answers."))
+                     "answers" + (f"; dashed on the colour bar: {chance_words}."
+                                  if chance is not None else ".")))
+    if has_cells and paper and RECOGNITION_OUTCOME in outcome_names(cells, factor="modality"):
+        plan.append(("recognition", lambda: recognition_figure(analysis),
+                     "Recognition per modality: the mean over participants of each one's "
+                     f"percentage of right answers, with its {_ci_words(cells, [RECOGNITION_OUTCOME])}"
+                     "; faint dots: each participant"
+                     + (f"; dashed: {chance_words}." if chance is not None else ".")
+                     + _dots_words(people([RECOGNITION_OUTCOME]))))
     if has_cells:
         if RT_OUTCOME in outcome_names(cells, factor="modality:pen"):
             plan.append(("figure11" if paper else "response-times", lambda: figure11(analysis),
@@ -182,11 +198,13 @@ def _figure_plan(analysis) -> list[tuple[str, object, str]]:
                          f"{only}"))
         if analysis.design not in ("study1", "study2"):
             for outcome in outcome_names(cells):
+                marked = (f"; dashed: {chance_words}" if chance is not None
+                          and outcome == RECOGNITION_OUTCOME else "")
                 plan.append((f"means-{_file_stem(outcome)}",
                              lambda outcome=outcome: means_figure(analysis, outcome),
                              f"{outcome_label(analysis, outcome)}: mean per level of each "
                              f"factor with its {_ci_words(cells, [outcome])}; dots: each "
-                             "participant." + _dots_words(people([outcome]))))
+                             f"participant{marked}." + _dots_words(people([outcome]))))
     known = QUESTIONNAIRE if analysis.design == "study2" else ()
     for outcome in outcome_names(participants, known=("recognition", RT_OUTCOME, *known)):
         factor = main_factor(participants, outcome)

@@ -9,11 +9,15 @@ captions and files: :mod:`realpen.stats.figure_plan`; the power plot:
 :mod:`realpen.stats.power_plot`.
 
 - :func:`figure7` — Likert outcomes (Q1, Q2) per condition: mean ± 95 % CI, participants behind.
-- :func:`figure10` — a confusion matrix per modality: counts and row percentages.
+- :func:`figure10` — a confusion matrix per modality: counts and row percentages, chance
+  marked on the colour bar.
+- :func:`recognition_figure` — recognition per modality: mean % correct ± 95 % CI, with the
+  chance line.
 - :func:`figure11` — response times (ms) per modality × pen: mean ± 95 % CI.
 - :func:`figure12` — each questionnaire item per modality: mean ± 95 % CI, participant lines.
 - :func:`participants_figure` — one small panel per participant across the main factor.
-- :func:`means_figure` — mean ± CI per level of each factor of one outcome (generic designs).
+- :func:`means_figure` — mean ± CI per level of each factor of one outcome (generic designs;
+  recognition with the chance line).
 
 Colours are the Okabe–Ito palette (:data:`realpen.display.charts.PALETTE`), and wherever
 colour tells groups apart a marker shape does too.
@@ -53,10 +57,12 @@ from realpen.stats.figure_data import (
     LIKERT_JITTER,
     LIKERT_UNIT,
     QUESTIONNAIRE,
+    RECOGNITION_OUTCOME,
     RT_OUTCOME,
     axis_label,
     cell_rows,
     cell_table,
+    chance_line,
     main_factor,
     no_data,
     ordered_levels,
@@ -68,8 +74,8 @@ from realpen.stats.figure_data import (
     require_table,
 )
 
-__all__ = ["figure7", "figure10", "figure11", "figure12", "participants_figure", "means_figure",
-           "MAX_PARTICIPANT_PANELS"]
+__all__ = ["figure7", "figure10", "figure11", "figure12", "recognition_figure",
+           "participants_figure", "means_figure", "MAX_PARTICIPANT_PANELS", "CHANCE_COLOUR"]
 
 MAX_COLUMNS = 4  # participant panels per row: wider would shrink on a page
 MAX_PARTICIPANT_PANELS = 48
@@ -77,6 +83,15 @@ MAX_PARTICIPANT_PANELS = 48
 larger study is one heat map, a row per participant: a panel each would take minutes to lay
 out and a page per 48 participants to read. Likewise a single-level factor's participants are
 labelled one by one up to this many."""
+CHANCE_COLOUR = "#D55E00"
+"""The chance line's colour (Okabe–Ito vermilion: apart from the means and the participants)."""
+
+
+def _draw_chance(axis: Axes, chance: tuple[float, str]) -> None:
+    """The dashed chance line across ``axis``, labelled ``chance (1/3)`` for its legend."""
+    percent, text = chance
+    axis.axhline(percent, color=CHANCE_COLOUR, lw=1.3, ls="--", zorder=3,
+                 label=f"chance ({text})")
 
 
 def figure7(analysis, ax: Axes | Sequence[Axes] | None = None, *,
@@ -143,6 +158,8 @@ def figure10(analysis, ax: Axes | Sequence[Axes] | None = None) -> Figure:
     Rows are the presented pen, columns the pen chosen; each cell shows its count and its
     percentage of the row (the colour), on one colour scale (0–100 %) across the panels. The
     diagonal (correct answers) is outlined, and each panel's title gives its overall rate.
+    Chance (one over the answers listed, :func:`realpen.stats.figure_data.chance_line`) is a
+    dashed mark on the colour bar and named in its label.
 
     Args:
         analysis: a :class:`realpen.stats.outcome.StudyAnalysis` with a ``confusion`` table.
@@ -200,11 +217,79 @@ def figure10(analysis, ax: Axes | Sequence[Axes] | None = None) -> Figure:
         axis.tick_params(length=0)
         axis.spines[:].set_visible(False)
     bar = axes[0].figure.colorbar(image, ax=axes, shrink=0.8, pad=0.02)
-    bar.set_label("share of the presented pen's answers (%)")
+    chance = chance_line(analysis)
+    if chance is None:
+        bar.set_label("share of the presented pen's answers (%)")
+    else:
+        bar.ax.axhline(chance[0], color=CHANCE_COLOUR, lw=2.4, ls="--")
+        bar.set_label(f"share of the presented pen's answers (%)\ndashed: chance "
+                      f"({chance[1]} = {chance[0]:.0f} %)")
     if own:
-        axes[0].figure.suptitle("pen recognition per modality: count and row percentage",
+        about = f" (chance {chance[1]})" if chance is not None else ""
+        axes[0].figure.suptitle(f"pen recognition per modality: count and row percentage{about}",
                                 fontsize="medium")
     return axes[0].figure
+
+
+def recognition_figure(analysis, ax: Axes | None = None) -> Figure:
+    """Recognition per modality: the mean percentage correct ± 95 % CI, with the chance line.
+
+    The means and intervals are those of ``cells`` (outcome ``recognition``, factor
+    ``modality``: the mean over participants of each one's percentage correct); each
+    participant's percentage is a faint dot beside its mean, and chance
+    (:func:`realpen.stats.figure_data.chance_line`: 1/3 in study 2) a dashed line labelled
+    ``chance (1/3)``. Without modalities the recognition outcome's first factor is used.
+
+    Args:
+        analysis: a :class:`realpen.stats.outcome.StudyAnalysis` with recognition ``cells``.
+        ax: the Axes to draw into; None makes a new figure (not a pyplot one).
+
+    Returns:
+        The Figure drawn into.
+
+    Examples:
+        >>> import pandas as pd
+        >>> from realpen.stats.outcome import StudyAnalysis
+        >>> cells = pd.DataFrame({"outcome": "recognition", "factor": "modality",
+        ...                       "level": ["tactile", "auditory"], "mean": [43.0, 51.0],
+        ...                       "ci_low": [35.0, 44.0], "ci_high": [51.0, 58.0],
+        ...                       "ci_method": "t", "n": 12, "unit": "%"})
+        >>> confusion = pd.DataFrame({"modality": "tactile", "pen": "pencil",
+        ...                           "chosen": ["pencil", "ballpoint", "marker"],
+        ...                           "count": [3, 1, 0], "row_percent": [75.0, 25.0, 0.0]})
+        >>> empty = pd.DataFrame()
+        >>> analysis = StudyAnalysis("study2", "Study 2", empty, cells, empty, confusion, empty)
+        >>> axis = recognition_figure(analysis).axes[0]
+        >>> [line.get_label() for line in axis.get_lines() if line.get_linestyle() == "--"]
+        ['chance (1/3)']
+    """
+    cells = cell_table(analysis)
+    factors = [factor for factor in dict.fromkeys(
+        cells.loc[cells["outcome"] == RECOGNITION_OUTCOME, "factor"]) if ":" not in factor]
+    if not factors:
+        raise no_data("recognition cells", "recognition_figure")
+    factor = "modality" if "modality" in factors else factors[0]
+    rows = cell_rows(cells, RECOGNITION_OUTCOME, factor)
+    levels = list(rows.index)
+    (axis,) = axes_list(ax, 1, (max(4.5, 1.4 * len(levels) + 2.0), 4.0), "ax")
+    x = np.arange(len(levels), dtype=float)
+    matrix = participant_matrix(participant_table(analysis), RECOGNITION_OUTCOME, factor, levels)
+    for position, level in zip(x, levels):
+        if level in matrix.columns:
+            draw_participant_dots(axis, position - 0.15, matrix[level].to_numpy(float),
+                                  colour=PALETTE[0], width=0.25, span=100.0)
+    draw_mean_ci(axis, x + 0.12, rows, label="mean ± 95 % CI")
+    chance = chance_line(analysis)
+    if chance is not None:
+        _draw_chance(axis, chance)
+    style_axes(axis)
+    level_axis(axis, levels, factor_label(factor), rotate=len(levels) > 4)
+    axis.set_ylim(0.0, 100.0)
+    axis.set_ylabel(axis_label(analysis, RECOGNITION_OUTCOME, "%"))
+    axis.legend(frameon=False, loc="best", fontsize="small")
+    panel_title(axis, f"recognition per {factor_label(factor)}: mean % correct ± 95 % CI",
+                own=ax is None)
+    return axis.figure
 
 
 def figure11(analysis, ax: Axes | None = None) -> Figure:
@@ -514,9 +599,11 @@ def _one_level(analysis, outcome: str, factor: str, matrix: pd.DataFrame, unit: 
         axis.set_ylim(*likert_limits(values))
     axis.set_xlabel("participant")
     axis.set_ylabel(axis_label(analysis, outcome, unit))
-    panel_title(axis, f"{outcome_label(analysis, outcome)} ({factor_label(factor)} "
-                      f"{label_text(matrix.columns[0])} only): each participant (dashed: group "
-                      "mean)", own=ax is None, fontsize="medium")
+    # An outcome without a factor has the one level "all": naming it would read "(all all only)".
+    only = ("" if factor == "all" else
+            f" ({factor_label(factor)} {label_text(matrix.columns[0])} only)")
+    panel_title(axis, f"{outcome_label(analysis, outcome)}{only}: each participant (dashed: "
+                      "group mean)", own=ax is None, fontsize="medium")
     return axis.figure
 
 
@@ -524,7 +611,9 @@ def means_figure(analysis, outcome: str, ax: Axes | Sequence[Axes] | None = None
     """Mean ± CI of ``outcome`` per level of each factor the analysis lists (generic designs).
 
     One panel per factor (and interaction) in ``cells``; the participants' own values, when
-    listed, are faint dots beside each mean (equal values spread sideways).
+    listed, are faint dots beside each mean (equal values spread sideways). Recognition (in %)
+    gets the dashed chance line in every panel
+    (:func:`realpen.stats.figure_data.chance_line`).
 
     Args:
         analysis: a :class:`realpen.stats.outcome.StudyAnalysis`.
@@ -555,6 +644,7 @@ def means_figure(analysis, outcome: str, ax: Axes | Sequence[Axes] | None = None
     unit = outcome_unit(cells, outcome)
     axes, own = panels(ax, len(factors), columns=3, panel=(4.2, 3.6))
     participants = participant_table(analysis)
+    chance = chance_line(analysis) if outcome == RECOGNITION_OUTCOME and unit == "%" else None
     everything = []
     for axis, factor in zip(axes, factors):
         level_rows = cell_rows(cells, outcome, factor)
@@ -568,6 +658,8 @@ def means_figure(analysis, outcome: str, ax: Axes | Sequence[Axes] | None = None
             draw_participant_dots(axis, position - 0.15, matrix[level].to_numpy(float),
                                   colour=PALETTE[0], width=0.25, span=span)
         draw_mean_ci(axis, x + 0.12, level_rows)
+        if chance is not None:
+            _draw_chance(axis, chance)
         style_axes(axis)
         level_axis(axis, levels, factor_label(factor),
                    rotate=len(levels) > 4 and max(map(len, levels)) > 3)
@@ -576,6 +668,8 @@ def means_figure(analysis, outcome: str, ax: Axes | Sequence[Axes] | None = None
     if unit == LIKERT_UNIT:
         for axis in axes:
             axis.set_ylim(*likert_limits(everything))
+    if chance is not None:
+        axes[0].legend(frameon=False, loc="best", fontsize="small")
     if own:
         axes[0].figure.suptitle(f"{outcome_label(analysis, outcome)}: mean ± 95 % CI per level "
                                 "(dots: each participant)", fontsize="medium")

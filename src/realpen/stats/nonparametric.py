@@ -18,7 +18,7 @@ import scipy.stats
 from realpen.checks import require_choice
 from realpen.errors import ParameterError
 from realpen.stats.long import balanced_wide, shown_level
-from realpen.stats.results import TEST_COLUMNS, tidy
+from realpen.stats.results import TEST_COLUMNS, pair_label, tidy
 from realpen.stats.results import test_row as _result_row  # pytest would collect "test_row"
 
 __all__ = ["friedman", "wilcoxon", "wilcoxon_long", "WILCOXON_METHODS",
@@ -354,7 +354,8 @@ def wilcoxon_long(data: pd.DataFrame, *, dv: str, within: str, subject: str, a: 
         method: as :func:`wilcoxon`.
 
     Returns:
-        :func:`wilcoxon`'s row with ``effect`` (``"a-b"``), ``a`` and ``b`` first among its own
+        :func:`wilcoxon`'s row with ``effect`` (``"a vs b"``:
+        :func:`realpen.stats.results.pair_label`), ``a`` and ``b`` first among its own
         columns.
 
     Raises:
@@ -369,7 +370,7 @@ def wilcoxon_long(data: pd.DataFrame, *, dv: str, within: str, subject: str, a: 
         >>> row = wilcoxon_long(data, dv="rating", within="condition", subject="subject",
         ...                     a="D", b="F").iloc[0]
         >>> print(f"{row.effect}: T = {row.statistic:g}, p = {row.p:.4f}")
-        D-F: T = 0, p = 0.0312
+        D vs F: T = 0, p = 0.0312
     """
     require_choice("method", method, WILCOXON_METHODS)
     if not isinstance(within, str):
@@ -385,4 +386,4 @@ def wilcoxon_long(data: pd.DataFrame, *, dv: str, within: str, subject: str, a: 
     result = wilcoxon(wide[(a,)].to_numpy(), wide[(b,)].to_numpy(), method=method)
     row = result.iloc[0].to_dict()
     first = {key: row.pop(key) for key in list(row) if key in TEST_COLUMNS}
-    return tidy([{**first, "effect": f"{a}-{b}", "a": a, "b": b, **row}])
+    return tidy([{**first, "effect": pair_label(a, b), "a": a, "b": b, **row}])

@@ -27,9 +27,15 @@ PARTICIPANT_COLUMNS = ("outcome", "factor", "level", "participant", "value", "un
 CONFUSION_COLUMNS = ("modality", "pen", "chosen", "count", "row_percent")
 """``confusion``: for recognition, how often each presented ``pen`` was answered as ``chosen``,
 per modality; ``row_percent`` is 100 × count / the row's total."""
-PAPER_COLUMNS = ("analysis", "outcome", "effect", "quantity", "paper", "ours", "note")
-"""``paper``: a number the paper reported beside ours (``quantity`` e.g. ``chi2``, ``p``,
-``df``, ``rate_percent``); ``ours`` may be NaN with a ``note`` saying why."""
+PAPER_COLUMNS = ("analysis", "outcome", "effect", "quantity", "paper", "ours", "note", "test",
+                 "reported")
+"""``paper``: one number the paper reported beside ours (:mod:`realpen.stats.paper`).
+``quantity`` is ``statistic``, ``df1``, ``df2`` or ``p`` of a test (``test`` names ours, the
+``analysis``, ``outcome`` and ``effect`` find its row of ``results``), ``rate_percent``, or
+``mean``/``sd`` (response times in s); ``paper`` is NaN where the paper gives no value and
+``reported`` the number as the paper printed it (``< .001`` for a bound, ``n.s.`` for a test
+it calls not significant without a value, empty when not given);
+``ours`` may be NaN with a ``note`` saying why."""
 
 
 @dataclass

@@ -18,7 +18,7 @@ import pandas as pd
 from realpen.errors import fail
 from realpen.io.files import current_umask
 from realpen.stats.outcome import StudyAnalysis
-from realpen.stats.results import RESULT_COLUMNS
+from realpen.stats.results import completed
 
 __all__ = ["write_report_folder", "check_report_folder", "TABLE_FILES", "MARKER"]
 
@@ -83,7 +83,8 @@ def write_report_folder(analysis: StudyAnalysis, folder: str | os.PathLike) -> l
     try:
         (staging / MARKER).write_text("A RealPen report folder (realpen stats): it may be "
                                       "replaced whole by the next report written here.\n")
-        _write_csv(analysis.results[list(RESULT_COLUMNS)], staging / "results.csv")
+        # completed: rows an analysis did not make through with_context get their sentence too
+        _write_csv(completed(analysis.results), staging / "results.csv")
         _write_csv(analysis.cells, staging / "cells.csv")
         _write_csv(analysis.participants, staging / "participants.csv")
         _write_csv(analysis.confusion, staging / "confusion.csv")

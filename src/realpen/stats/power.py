@@ -546,6 +546,10 @@ def report_power(participants: int, design: Design, *, sims: int = 200, seed: in
     study's, and the simulation would take minutes)."""
     if progress is not None:
         progress(0, 1)
+    if not _outcomes(design):  # nothing varies: no test, so no effect to detect
+        if progress is not None:
+            progress(1, 1)
+        return pd.DataFrame(columns=list(MDE_COLUMNS))
     if isinstance(participants, (int, np.integer)) and participants > MAX_PARTICIPANTS:
         _, outcomes = _prepare(design, None, seed, sims)
         note = (f"not simulated: {participants:,} participants, more than the "

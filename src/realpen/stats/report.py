@@ -7,10 +7,11 @@ block, and nothing refers to another file or to the network. Every value that co
 data (participant codes, outcome names, notes, the source's name) is escaped.
 
 The sections, in order: title; the data source and options; what the data are (participants,
-excluded ones and why); the methods (verbatim); the results per analysis, with numbers that
-repeat the paper's choices marked ``paper-compatible`` and the reason; the paper's numbers
-beside ours; notes; the figures with captions; the per-cell means; power, if simulated; the
-software versions.
+excluded ones and why); the methods (verbatim); the results per analysis, each test with its
+APA-style sentence and the number of its method in a list that gives each distinct method once
+(numbers that repeat the paper's choices marked ``paper-compatible`` and the reason); the
+paper's numbers beside ours, each comparison as two sentences written the same way; notes; the
+figures with captions; the per-cell means; power, if simulated; the software versions.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import base64
 import html
 import math
 import os
+import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -27,12 +29,13 @@ import pandas as pd
 from realpen.errors import ParameterError, fail
 from realpen.io.files import atomic_path
 from realpen.stats.figure_plan import figure_captions
+from realpen.stats.paper import comparison_table
 from realpen.stats.power_plot import split_power
-from realpen.stats.results import PAPER_COMPATIBLE, RESULT_COLUMNS
+from realpen.stats.results import PAPER_COMPATIBLE, RESULT_COLUMNS, completed
 from realpen.stats.texts import software_versions
 
 __all__ = ["write_report", "report_html", "format_p", "format_df", "format_number",
-           "software_versions"]
+           "software_versions", "method_list"]
 
 REPORT_NAME = "report.html"
 DASH = "—"
@@ -50,7 +53,11 @@ th, td { border-bottom: 1px solid #ddd; padding: .25rem .55rem; text-align: left
 th { background: #f3f3f3; font-weight: 600; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
 td.key { white-space: nowrap; }
-td.method { font-size: .8rem; color: #444; min-width: 16rem; }
+td.method { font-size: .8rem; color: #444; }
+td.details { font-size: .8rem; color: #444; min-width: 10rem; }
+td.apa { min-width: 15rem; }
+ol.methods li { margin: .25rem 0; font-size: .88rem; max-width: 60rem; }
+ol.methods li:target { background: #fff4e0; }
 .wide { overflow-x: auto; }
 tr.paper-compatible td { background: #fff4e0; }
 .badge { display: inline-block; font-size: .72rem; font-weight: 600; padding: 0 .4rem;
@@ -142,13 +149,6 @@ def _quantity(value: object, quantity: str) -> str:
     return format_number(value)
 
 
-def _difference(ours: object, paper: object) -> str:
-    a, b = _finite(ours), _finite(paper)
-    if a is None or b is None:
-        return DASH
-    return f"{a - b:+.3f}"
-
-
 # --------------------------------------------------------------------------- html pieces
 
 def _e(value: object) -> str:
@@ -169,11 +169,16 @@ def _table(header: Sequence[str], rows: Iterable[Sequence[str]], *, row_classes=
         css = f' class="{row_classes[k]}"' if row_classes and row_classes[k] else ""
         cells = "".join(f'<td class="num">{cell}</td>' if j in numeric else
                         f'<td class="key">{cell}</td>' if j in keys else
-                        f'<td class="method">{cell}</td>' if header[j] == "method" else
+                        f'<td class="{_CELL_CLASSES[header[j]]}">{cell}</td>'
+                        if header[j] in _CELL_CLASSES else
                         f"<td>{cell}</td>" for j, cell in enumerate(row))
         body.append(f"<tr{css}>{cells}</tr>")
     return (f'<div class="wide"><table><thead><tr>{head}</tr></thead>'
             f"<tbody>{''.join(body)}</tbody></table></div>")
+
+
+_CELL_CLASSES = {"method": "method", "details": "details", "APA-style": "apa", "paper": "apa",
+                 "ours": "apa"}
 
 
 def _frame(analysis, name: str) -> pd.DataFrame:
@@ -238,38 +243,145 @@ def _methods_section(analysis) -> str:
             + (paragraphs or '<p class="muted">No methods text was given.</p>') + "</section>")
 
 
+_TOKEN = re.compile(r"\d+(?:\.\d+)?(?:e[-+]?\d+)?|[^\W\d]+|\s+|.")
+_PART = re.compile(r"[^;,]+")
+_DETAIL_MAX = 48
+"""A part of a method (between ``;`` or ``,``) that differs between rows is shown beside the row
+when at most this long; a longer one only in the method list (and whole in results.csv)."""
+_MERGE_TOKENS = 8
+"""Methods that differ in at most this many words, numbers or signs are listed as one."""
+VARIES = "…"
+"""Stands in a listed method for what differs between the rows using it."""
+
+
+def _opcodes(first: list[str], other: list[str]) -> list[tuple[str, int, int, int, int]] | None:
+    """How ``other`` differs from ``first`` (difflib opcodes), or None when the two differ in
+    more than :data:`_MERGE_TOKENS` tokens (then they are two methods)."""
+    import difflib
+
+    codes = difflib.SequenceMatcher(None, first, other, autojunk=False).get_opcodes()
+    changed = sum(max(i2 - i1, j2 - j1) for tag, i1, i2, j1, j2 in codes if tag != "equal")
+    return codes if changed <= _MERGE_TOKENS else None
+
+
+def method_list(methods: Sequence[str]) -> tuple[list[str], list[int], list[str]]:
+    """Each distinct method once, and what each row adds to it.
+
+    Methods that differ only in a few words or numbers (the zeros a Wilcoxon test dropped, a
+    sphericity test's W and p, the level a test is of) are one method, listed with
+    :data:`VARIES` where they differ; each row's details are the short parts of its own
+    method (between ``;`` or ``,``) that differ.
+
+    Args:
+        methods: each row's ``method``, in row order.
+
+    Returns:
+        ``(texts, numbers, details)``: the distinct methods in order of first use, each row's
+        number in that list (from 1), each row's details (``""`` when none).
+
+    Examples:
+        >>> texts, numbers, details = method_list(["exact; zeros dropped (2)",
+        ...                                        "exact; zeros dropped (3)", "spss"])
+        >>> texts, numbers, details
+        (['exact; zeros dropped (…)', 'spss'], [1, 1, 2], ['zeros dropped (2)', 'zeros dropped (3)', ''])
+    """
+    tokens = [list(_TOKEN.finditer(text)) for text in methods]
+    words = [[match.group(0) for match in found] for found in tokens]
+    groups: list[tuple[int, list[int]]] = []  # (the first row, every row)
+    codes: dict[int, list[tuple[str, int, int, int, int]]] = {}  # row -> against its first
+    for row in range(len(methods)):
+        for first, members in groups:
+            found = _opcodes(words[first], words[row])
+            if found is not None:
+                members.append(row)
+                codes[row] = found
+                break
+        else:
+            groups.append((row, [row]))
+            codes[row] = [("equal", 0, len(words[row]), 0, len(words[row]))]
+    texts: list[str] = []
+    numbers = [0] * len(methods)
+    details = [""] * len(methods)
+    for first, members in groups:
+        # Positions of the first row's tokens that some row changes (2k: token k, 2k - 1: the
+        # gap before it, where a row inserts).
+        marks: set[int] = set()
+        for row in members:
+            for tag, i1, i2, _, _ in codes[row]:
+                if tag != "equal":
+                    marks.update(range(2 * i1, 2 * i2, 2) if i2 > i1 else {2 * i1 - 1})
+        template, previous = [], False
+        for position, word in enumerate(words[first]):
+            varies = 2 * position in marks and not word.isspace()
+            if (varies or 2 * position - 1 in marks) and not previous:
+                template.append(VARIES)
+            if not varies:
+                template.append(word)
+            previous = varies
+        if 2 * len(words[first]) - 1 in marks and not previous:
+            template.append(VARIES)
+        texts.append("".join(template))
+        for row in members:
+            numbers[row] = len(texts)
+            own: set[int] = set()  # this row's tokens where the rows differ
+            for tag, i1, i2, j1, j2 in codes[row]:
+                if tag != "equal":
+                    own.update(range(j1, j2))
+                else:
+                    own.update(j1 + k for k in range(i2 - i1) if 2 * (i1 + k) in marks)
+            spans = [tokens[row][k].span() for k in own if not words[row][k].isspace()]
+            parts = [part.group(0).strip() for part in _PART.finditer(methods[row])
+                     if any(part.start() <= a and b <= part.end() for a, b in spans)]
+            details[row] = ", ".join(part for part in parts if len(part) <= _DETAIL_MAX)
+    return texts, numbers, details
+
+
 def _results_section(analysis) -> str:
     results = _frame(analysis, "results")
     parts = ['<section id="results"><h2>Results</h2>']
-    missing = [c for c in RESULT_COLUMNS if c not in results.columns]
+    missing = [c for c in RESULT_COLUMNS if c not in results.columns and
+               c not in ("apa", "level_a", "level_b")]
     if results.empty or missing:
         parts.append('<p class="muted">No test results.</p></section>')
         return "".join(parts)
+    results = completed(results)
     marked = results["method"].astype(str).str.startswith(PAPER_COMPATIBLE)
     if marked.any():
         parts.append(f'<p><span class="badge">{PAPER_COMPATIBLE}</span> marks numbers that '
                      "repeat the paper's choices; they are not recommended, for the reason "
-                     "given beside each.</p>")
-    header = ("outcome", "effect", "test", "statistic", "value", "df1", "df2", "p",
-              "p adjusted", "adjust", "effect size", "value", "n", "method")
+                     "given in their method.</p>")
+    texts, numbers, details = method_list(results["method"].astype(str).tolist())
+    parts.append("<p>Each row gives its result as an APA-style sentence to paste, and the number "
+                 'of its method in the <a href="#test-methods">list below the tables</a> (with '
+                 "the row's own numbers beside it; results.csv has each row's full method).</p>")
+    header = ("outcome", "effect", "test", "APA-style", "statistic", "value", "df1", "df2", "p",
+              "p adjusted", "adjust", "effect size", "value", "n", "method", "details")
     for name, group in results.groupby("analysis", sort=False):
         rows, classes = [], []
-        for row in group.itertuples(index=False):
-            method = str(row.method)
-            paper = method.startswith(PAPER_COMPATIBLE)
+        for index, row in zip(group.index, group.itertuples(index=False)):
+            paper = str(row.method).startswith(PAPER_COMPATIBLE)
             test = _e(row.test) + (f'<br><span class="badge">{PAPER_COMPATIBLE}</span>'
                                    if paper else "")
             n = _finite(row.n)
-            rows.append((_e(row.outcome), _e(row.effect), test, _e(row.statistic_name),
-                         format_number(row.statistic), format_df(row.df1), format_df(row.df2),
-                         _e(format_p(row.p)), _e(format_p(row.p_adjusted)), _e(row.adjust),
+            number = numbers[index]
+            rows.append((_e(row.outcome), _e(row.effect), test, _e(row.apa or DASH),
+                         _e(row.statistic_name), format_number(row.statistic),
+                         format_df(row.df1), format_df(row.df2), _e(format_p(row.p)),
+                         _e(format_p(row.p_adjusted)), _e(row.adjust),
                          _e(row.effect_size_name or ""), format_number(row.effect_size),
                          DASH if n is None else str(int(n)),
-                         _e(_paper_reason(method)) if paper else _e(method)))
+                         f'<a href="#method-{number}">[{number}]</a>', _e(details[index])))
             classes.append(PAPER_COMPATIBLE if paper else "")
         parts.append(f"<h3>{_e(name)}</h3>")
         parts.append(_table(header, rows, row_classes=classes,
-                            numeric=(4, 5, 6, 7, 8, 11, 12), keys=(0, 1)))
+                            numeric=(5, 6, 7, 8, 9, 12, 13), keys=(0, 1)))
+    items = "".join(f'<li id="method-{k}">'
+                    + (f'<span class="badge">{PAPER_COMPATIBLE}</span> {_e(_paper_reason(text))}'
+                       if text.startswith(PAPER_COMPATIBLE) else _e(text)) + "</li>"
+                    for k, text in enumerate(texts, start=1))
+    parts.append(f'<h3 id="test-methods">How each row was computed</h3>'
+                 f"<p>{VARIES} stands for a number that differs between the rows using the "
+                 f'method: it is in the row\'s details.</p><ol class="methods">{items}</ol>')
     parts.append("</section>")
     return "".join(parts)
 
@@ -278,15 +390,30 @@ def _paper_section(analysis) -> str:
     paper = _frame(analysis, "paper")
     if paper.empty:
         return ""
-    rows = []
+    comparisons = comparison_table(analysis)
+    rows = [(_e(row.analysis), _e(row.outcome), _e(row.effect), _e(row.paper or DASH),
+             _e(row.ours or DASH), _e(row.note or ""))
+            for row in comparisons.itertuples(index=False)]
+    numbers = []
     for row in paper.itertuples(index=False):
         quantity = str(getattr(row, "quantity", ""))
-        rows.append((_e(row.analysis), _e(row.outcome), _e(row.effect), _e(quantity),
-                     _e(_quantity(row.paper, quantity)), _e(_quantity(row.ours, quantity)),
-                     _difference(row.ours, row.paper), _e(getattr(row, "note", "") or "")))
+        reported = getattr(row, "reported", "")
+        # A bound (< .001) or "n.s." as the paper printed it, not as a number
+        shown = (str(reported) if isinstance(reported, str) and reported
+                 and (reported.startswith("<") or _finite(row.paper) is None)
+                 else _quantity(row.paper, quantity))
+        numbers.append((_e(row.analysis), _e(row.outcome), _e(row.effect), _e(quantity),
+                        _e(shown), _e(_quantity(row.ours, quantity))))
     return ('<section id="paper"><h2>The paper\'s numbers beside ours</h2>'
-            + _table(("analysis", "outcome", "effect", "quantity", "paper", "ours",
-                      "ours − paper", "note"), rows, numeric=(4, 5, 6)) + "</section>")
+            "<p>Each comparison written the same way for the paper and for us (a dash: not "
+            "given). Where the paper's choice differs from ours, the paper-compatible row that "
+            "repeats it is listed too (with --paper-compatible).</p>"
+            + _table(("analysis", "outcome", "effect", "paper", "ours", "note"), rows,
+                     keys=(0, 1, 2))
+            + "<details><summary>Every number (paper.csv)</summary>"
+            + _table(("analysis", "outcome", "effect", "quantity", "paper", "ours"), numbers,
+                     numeric=(4, 5))
+            + "</details></section>")
 
 
 def _notes_section(analysis) -> str:
@@ -434,8 +561,12 @@ def write_report(analysis, directory: str | os.PathLike,
     and there is no link to another file or to the network, so it opens offline and can be
     mailed as it is. Tables come from the analysis as they are (no statistic is computed
     here): p as ``< .001`` or 3 decimals, statistics and effect sizes with 3, df as integers
-    when whole (else 2 decimals); rows whose ``method`` starts with ``paper-compatible`` carry
-    a badge and the reason. Software versions come from :mod:`importlib.metadata`.
+    when whole (else 2 decimals); each row with its APA-style sentence (the ``apa`` column,
+    written from the row where missing) and the number of its method in a list that gives
+    each distinct method once (:func:`method_list`); rows whose ``method`` starts with
+    ``paper-compatible`` carry a badge, and their method the reason. The paper's numbers are
+    set beside ours as sentences (:func:`realpen.stats.paper.comparison_table`). Software
+    versions come from :mod:`importlib.metadata`.
 
     Args:
         analysis: a :class:`realpen.stats.outcome.StudyAnalysis`.

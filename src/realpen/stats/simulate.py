@@ -18,8 +18,8 @@ participant's answers depend on nothing else):
   points are used. The level effect spreads ``effect`` evenly over the levels of the design's
   main within factor in design order, centred on 0: level ``i`` of ``k`` gets
   ``effect × (i/(k−1) − 1/2)``, so the last level is ``effect`` latent SDs above the first.
-  The main factor is the design's conditions if it has any, else its modalities; a trial not
-  at one of its levels gets no effect.
+  The main factor is the first of the design's conditions, modalities and pens that has two
+  levels or more (:func:`main_factor`); a trial not at one of its levels gets no effect.
 - **Recognition** (a choice question with ``correct: pen``): right with the probability
   ``rates[modality]`` — with ``pen_effect`` ≠ 0 shifted on the log-odds scale, spread evenly
   and centred over the design's pens like the Likert effect — else one of the other choices,
@@ -121,16 +121,23 @@ class ResponseModel:
 # ---- the design's structure as the model sees it ---------------------------------------------
 
 def main_factor(design: Design) -> tuple[str, tuple[str, ...]]:
-    """The design's main within factor and its levels in design order: ``("condition", (A, …))``
-    when the design has conditions, else ``("modality", (its modalities))``.
+    """The design's main within factor and its levels in design order: the first of
+    ``("condition", (A, …))``, ``("modality", (its modalities))`` and ``("pen", (its pen
+    ids))`` with two levels or more (a design of one pen per condition varies its conditions;
+    one that varies only its pens, its pens); with none, its conditions if it has any, else
+    its modality.
 
     >>> from realpen.study.design import load_design
     >>> main_factor(load_design("study2"))
     ('modality', ('tactile', 'auditory', 'audio-tactile'))
     """
-    if design.conditions:
-        return "condition", tuple(condition.id for condition in design.conditions)
-    return "modality", tuple(design.modalities)
+    candidates = (("condition", tuple(condition.id for condition in design.conditions)),
+                  ("modality", tuple(design.modalities)),
+                  ("pen", tuple(pen.id for pen in design.pens)))
+    for factor, levels in candidates:
+        if len(levels) >= 2:
+            return factor, levels
+    return candidates[0] if design.conditions else candidates[1]
 
 
 def level_positions(count: int) -> np.ndarray:
@@ -159,7 +166,7 @@ def likert_cuts(points: int, participant_sd: float) -> np.ndarray:
 
 def level_of(trial: PlannedTrial, factor: str, levels: tuple[str, ...]) -> int | None:
     """The index of ``trial``'s level of the main factor, or None when it is at none of them."""
-    value = trial.condition if factor == "condition" else trial.modality
+    value = getattr(trial, factor)
     return levels.index(value) if value in levels else None
 
 
