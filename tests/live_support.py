@@ -63,24 +63,86 @@ class Served:
         return "".join(self.output)
 
 
-@contextlib.contextmanager
-def serve(tmp_path: Path, *args: str, timeout: float = 30,
-          stderr_to: Path | None = None, program: list[str] | None = None) -> Iterator[Served]:
-    """Run ``realpen serve --port 0 --store tmp/strokes.sqlite3 ARGS`` until the block ends.
+# ``python -m realpen`` held back: it imports what ``realpen serve`` imports (most of a server's
+# start-up) and then waits for a line on stdin before it reads its arguments or opens the store.
+WARM_REALPEN = """
+import sys
+import realpen.cli, realpen.live.app, realpen.live.device, realpen.live.server, realpen.study.db
+import alembic.command, alembic.config, scipy.signal
+sys.stdin.readline()
+from realpen.cli import main
+main()
+"""
 
-    stderr goes with stdout, or to the file ``stderr_to`` (:meth:`Served.errors`). ``program``
-    is the ``realpen`` to run (default: this interpreter's, ``python -m realpen``); another one
-    (an installed wheel's script) runs without this process's ``PYTHONPATH``.
-    """
+
+@dataclass
+class Spare:
+    """A ``realpen serve`` started ahead of time (:func:`spare_server`), waiting to be run by
+    :func:`serve`."""
+
+    process: subprocess.Popen
+    errors: object | None
+    stderr_to: Path | None
+
+
+def _launch(tmp_path: Path, args: tuple[str, ...], stderr_to: Path | None,
+            program: list[str] | None, held: bool = False):
     env = {**os.environ, "REALPEN_HOME": str(tmp_path / "home"), "PYTHONUNBUFFERED": "1"}
     if program is not None:
         env.pop("PYTHONPATH", None)
     store = [] if "--store" in args else ["--store", str(tmp_path / "strokes.sqlite3")]
-    realpen = program if program is not None else [sys.executable, "-m", "realpen"]
+    if held:
+        realpen = [sys.executable, "-c", WARM_REALPEN]
+    else:
+        realpen = program if program is not None else [sys.executable, "-m", "realpen"]
     command = [*realpen, "serve", "--port", "0", *store, *args]
     errors = open(stderr_to, "w") if stderr_to else None
     process = subprocess.Popen(command, stdout=subprocess.PIPE,
+                               stdin=subprocess.PIPE if held else None,
                                stderr=errors if errors else subprocess.STDOUT, text=True, env=env)
+    return process, errors
+
+
+@contextlib.contextmanager
+def spare_server(tmp_path: Path, *args: str, stderr_to: Path | None = None) -> Iterator[Spare]:
+    """Start ``realpen serve`` (the arguments of :func:`serve`) now, to be run later in the block
+    by ``serve(tmp_path, spare=...)``: the new interpreter imports the server's modules meanwhile
+    and touches neither the store nor a port until then. A test that restarts a server after a
+    crash thus waits only for what a restart does after Python's imports, the same store
+    recovery included. A spare left unused is killed when the block ends."""
+    process, errors = _launch(tmp_path, args, stderr_to, None, held=True)
+    try:
+        yield Spare(process, errors, stderr_to)
+    finally:
+        if process.stdin is not None:  # never served
+            process.kill()
+            process.communicate()
+            if errors:
+                errors.close()
+
+
+@contextlib.contextmanager
+def serve(tmp_path: Path, *args: str, timeout: float = 30,
+          stderr_to: Path | None = None, program: list[str] | None = None,
+          spare: Spare | None = None) -> Iterator[Served]:
+    """Run ``realpen serve --port 0 --store tmp/strokes.sqlite3 ARGS`` until the block ends.
+
+    stderr goes with stdout, or to the file ``stderr_to`` (:meth:`Served.errors`). ``program``
+    is the ``realpen`` to run (default: this interpreter's, ``python -m realpen``); another one
+    (an installed wheel's script) runs without this process's ``PYTHONPATH``. ``spare``: run
+    that server, started before by :func:`spare_server` with its arguments, instead.
+    """
+    if spare is None:
+        process, errors = _launch(tmp_path, args, stderr_to, program)
+    else:
+        assert not args and stderr_to is None and program is None, "the spare has its own"
+        process, errors, stderr_to = spare.process, spare.errors, spare.stderr_to
+        with contextlib.suppress(BrokenPipeError):  # it died: said below, with its output
+            process.stdin.write("go\n")
+            process.stdin.flush()
+        with contextlib.suppress(BrokenPipeError):
+            process.stdin.close()
+        process.stdin = None  # communicate() at the end must not flush it
     lines: list[str] = []
     deadline = time.monotonic() + timeout
     match = None
@@ -129,7 +191,7 @@ def low_rate_profile(folder: Path, name: str = "slowpen", rate: int = 2000) -> P
     return save_profile(PenProfile(meta, tactile, pencil.sound), folder / name)
 
 
-def stroke_messages(pen: str = "pencil", stroke: int = 1, modality: str = "auditory-tactile",
+def stroke_messages(pen: str = "pencil", stroke: int = 1, modality: str = "audio-tactile",
                     n: int = 20, t0: float = 10.0, seq0: int = 1, pressure: float = 0.6,
                     speed: float = 60.0) -> list[dict]:
     """pen_down, then per sample a gain and a one-sample batch, then pen_up."""

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from live_support import CHROMIUM, CHROMIUM_ARGS, CHROMIUM_MISSING, low_rate_profile, serve
+from live_support import CHROMIUM, CHROMIUM_ARGS, CHROMIUM_MISSING, low_rate_profile, serve, spare_server
 
 from realpen.motion.coupling import Coupling, one_pole
 from realpen.motion.trajectory import Trajectory
@@ -45,6 +45,17 @@ def server(tmp_path_factory):
     with serve(folder) as served:
         served.store = folder / "strokes.sqlite3"
         yield served
+
+
+@pytest.fixture(scope="module")
+def lan_server(tmp_path_factory):
+    """A server in LAN mode (its token or cookie required) that also offers a pen whose tactile
+    pattern is at 2 kHz (a profile folder of its own): one server for the two tests of them."""
+    folder = tmp_path_factory.mktemp("lan")
+    low_rate_profile(folder / "low")  # like `realpen profile build --rate 2000`
+    with serve(folder, "--lan", "--host", "127.0.0.1", "--profiles", str(folder / "low")) as lan:
+        lan.store = folder / "strokes.sqlite3"
+        yield lan
 
 
 @pytest.fixture
@@ -156,7 +167,7 @@ def writing(n: int = 90, x0: float = 60, y0: float = 220):
     return points
 
 
-def loops(x0: float, y0: float, n: int = 190, size: float = 24):
+def loops(x0: float, y0: float, n: int = 130, size: float = 24):
     """Cursive loops (a prolate cycloid, like a row of l's), for the screenshots."""
     points = []
     for i in range(n):
@@ -201,7 +212,7 @@ def test_page_loads_with_pickers_and_audio(open_page):
     assert [p.strip() for p in pens][:3] == ["Pencil", "Ballpoint", "Marker"]
     modalities = page.page.locator("#modalities button").evaluate_all(
         "bs => bs.map(b => b.dataset.value)")
-    assert modalities == ["tactile", "auditory", "auditory-tactile", "none"]
+    assert modalities == ["tactile", "auditory", "audio-tactile", "none"]
     state = page.eval("({pen: realpen.pen, modality: realpen.modality, ink: realpen.ink, "
                       "version: realpen.profileVersion, audio: realpen.audio, "
                       "coupling: realpen.coupling, notice: realpen.notice})")
@@ -215,7 +226,9 @@ def test_page_loads_with_pickers_and_audio(open_page):
 
 
 def test_pen_stroke_gives_ink_eq1_gain_device_messages_and_a_stored_stroke(open_page, server):
+    # The modality's old name in a bookmarked URL still works; the page says today's.
     page = open_page("?pen=pencil&modality=auditory-tactile&ink=visible")
+    assert page.eval("realpen.modality") == "audio-tactile"
     coupling = Coupling(**page.eval("realpen.coupling"))
     points = writing()
     page.stroke(points, hold_s=0.12, lift=False)  # hold still: the audio gain settles
@@ -260,7 +273,7 @@ def test_pen_stroke_gives_ink_eq1_gain_device_messages_and_a_stored_stroke(open_
     (stroke,) = store_rows(server, "SELECT id, pen, profile_version, modality, ink, pointer_type, "
                                    "sample_count, end_reason FROM strokes WHERE session = ?",
                            session)
-    assert stroke[1:] == ("pencil", resolve_profile("pencil").version, "auditory-tactile",
+    assert stroke[1:] == ("pencil", resolve_profile("pencil").version, "audio-tactile",
                           "visible", "pen", len(points), "pen_up")
     samples = store_rows(server, "SELECT t, pressure, speed, tilt_x, tilt_y FROM samples "
                                  "WHERE stroke_id = ? ORDER BY seq", stroke[0])
@@ -383,11 +396,11 @@ def test_calibration_sets_mm_and_speed(open_page, server):
 @pytest.mark.parametrize("viewport, name", [(LANDSCAPE, "live.png"),
                                             (PORTRAIT, "live-portrait.png")])
 def test_screenshot_on_a_tablet(open_page, viewport, name):
-    page = open_page("?modality=auditory-tactile&ink=visible", viewport=viewport)
+    page = open_page("?modality=audio-tactile&ink=visible", viewport=viewport)
     for row, pen in enumerate(("pencil", "ballpoint", "marker")):
         page.page.click(f"#pens button[data-value={pen}]")
         page.page.wait_for_function(f"() => realpen.pen === '{pen}'")
-        page.stroke(loops(60, 90 + 110 * row, n=190 if viewport is LANDSCAPE else 130))
+        page.stroke(loops(60, 90 + 110 * row))  # a row of loops: ink enough to see
     overflow = page.eval("document.documentElement.scrollWidth - window.innerWidth")
     assert overflow <= 0
     heights = page.page.locator("header button, footer button").evaluate_all(
@@ -399,28 +412,27 @@ def test_screenshot_on_a_tablet(open_page, viewport, name):
     assert page.problems == []
 
 
-def test_lan_mode_page_works_with_its_token_only(browser, tmp_path):
-    with serve(tmp_path, "--lan", "--host", "127.0.0.1") as lan:
-        lan.store = tmp_path / "strokes.sqlite3"
-        refused = browser.new_page()
-        assert refused.goto(lan.base).status == 401
-        refused.close()
-        # The printed URL (?token=…) and a preset; modules load with the cookie.
-        page = Page(browser, lan, "&modality=tactile")
-        try:
-            # The cookie works, so the token leaves the address bar and the history entry.
-            assert page.page.url == lan.base + "?modality=tactile"
-            page.stroke(writing(30))
-            session = page.eval("realpen.link.session")
-            assert store_rows(lan, "SELECT sample_count FROM strokes WHERE session = ?",
-                              session) == [(30,)]
-            page.page.reload()  # the cookie alone keeps the page working
-            page.page.wait_for_function("() => window.realpen && window.realpen.ready && "
-                                        "window.realpen.link.state === 'open'")
-            assert page.eval("realpen.modality") == "tactile" and lan.token not in page.page.url
-            assert page.problems == []
-        finally:
-            page.close()
+def test_lan_mode_page_works_with_its_token_only(browser, lan_server):
+    lan = lan_server
+    refused = browser.new_page()
+    assert refused.goto(lan.base).status == 401
+    refused.close()
+    # The printed URL (?token=…) and a preset; modules load with the cookie.
+    page = Page(browser, lan, "&modality=tactile")
+    try:
+        # The cookie works, so the token leaves the address bar and the history entry.
+        assert page.page.url == lan.base + "?modality=tactile"
+        page.stroke(writing(30))
+        session = page.eval("realpen.link.session")
+        assert store_rows(lan, "SELECT sample_count FROM strokes WHERE session = ?",
+                          session) == [(30,)]
+        page.page.reload()  # the cookie alone keeps the page working
+        page.page.wait_for_function("() => window.realpen && window.realpen.ready && "
+                                    "window.realpen.link.state === 'open'")
+        assert page.eval("realpen.modality") == "tactile" and lan.token not in page.page.url
+        assert page.problems == []
+    finally:
+        page.close()
 
 
 def test_a_stroke_drawn_across_a_server_crash_is_stored_whole_and_once(browser, tmp_path):
@@ -429,7 +441,9 @@ def test_a_stroke_drawn_across_a_server_crash_is_stored_whole_and_once(browser, 
         port = str(probe.getsockname()[1])
     store = tmp_path / "strokes.sqlite3"
     points = writing(80)
-    with serve(tmp_path, "--port", port) as first:
+    # The second server starts with the first, and runs once the first is killed: a restart.
+    with spare_server(tmp_path, "--port", port) as restart, \
+            serve(tmp_path, "--port", port) as first:
         first.store = store
         page = Page(browser, first)
         try:
@@ -443,7 +457,7 @@ def test_a_stroke_drawn_across_a_server_crash_is_stored_whole_and_once(browser, 
             page.pen("mouseReleased", *points[-1][:2], 0.0, t0 + 0.5)
             page.page.wait_for_function("() => window.realpen.link.state === 'closed' && "
                                         "window.realpen.link.unacked > 0")
-            with serve(tmp_path, "--port", port) as second:  # same port, same store
+            with serve(tmp_path, spare=restart) as second:  # same port, same store
                 second.store = store
                 page.page.wait_for_function("() => window.realpen.link.state === 'open' && "
                                             "window.realpen.link.unacked === 0", timeout=30_000)
@@ -456,75 +470,72 @@ def test_a_stroke_drawn_across_a_server_crash_is_stored_whole_and_once(browser, 
     assert xs == sorted(xs)  # in drawing order (the stroke goes left to right)
 
 
-def test_a_reload_keeps_and_sends_what_the_server_had_not_acknowledged(browser, tmp_path):
-    with serve(tmp_path) as server:
-        server.store = tmp_path / "strokes.sqlite3"
-        relay = {"on": True}  # off: the socket swallows everything, both ways
+def test_a_reload_keeps_and_sends_what_the_server_had_not_acknowledged(browser, server):
+    # The module's server: the strokes of this test are those stored after ``before``.
+    ((before,),) = store_rows(server, "SELECT COALESCE(MAX(id), 0) FROM strokes")
+    relay = {"on": True}  # off: the socket swallows everything, both ways
 
-        def route(ws):
-            upstream = ws.connect_to_server()
-            ws.on_message(lambda m: relay["on"] and upstream.send(m))
-            upstream.on_message(lambda m: relay["on"] and ws.send(m))
+    def route(ws):
+        upstream = ws.connect_to_server()
+        ws.on_message(lambda m: relay["on"] and upstream.send(m))
+        upstream.on_message(lambda m: relay["on"] and ws.send(m))
 
-        page = Page(browser, server)
-        try:
-            page.page.route_web_socket("**/ws", route)
-            page.page.reload()
-            page.page.wait_for_function("() => window.realpen && window.realpen.ready && "
-                                        "window.realpen.link.state === 'open'")
-            page.stroke(writing(30))
-            relay["on"] = False
-            page.stroke(writing(40, y0=320), lift=False)
-            page.pen("mouseReleased", 200, 320, 0.0, time.time() + 1)
-            page.page.wait_for_function("() => !window.realpen.down && "
-                                        "window.realpen.link.unacked > 0")
-            unacked = page.eval("realpen.link.unacked")
-            page.page.on("dialog", lambda dialog: dialog.accept())  # "leave the page?"
-            relay["on"] = True
-            page.page.reload()
-            page.page.wait_for_function("() => window.realpen && window.realpen.ready && "
-                                        "window.realpen.link.state === 'open' && "
-                                        "window.realpen.link.unacked === 0")
-            assert page.eval("realpen.stroke") == 2  # the same page: its numbers go on
-            assert page.problems == []
-        finally:
-            page.close()
-        strokes = store_rows(server, "SELECT page_stroke, sample_count, end_reason, page FROM "
-                                     "strokes ORDER BY id")
+    page = Page(browser, server)
+    try:
+        page.page.route_web_socket("**/ws", route)
+        page.page.reload()
+        page.page.wait_for_function("() => window.realpen && window.realpen.ready && "
+                                    "window.realpen.link.state === 'open'")
+        page.stroke(writing(30))
+        relay["on"] = False
+        page.stroke(writing(40, y0=320), lift=False)
+        page.pen("mouseReleased", 200, 320, 0.0, time.time() + 1)
+        page.page.wait_for_function("() => !window.realpen.down && "
+                                    "window.realpen.link.unacked > 0")
+        unacked = page.eval("realpen.link.unacked")
+        page.page.on("dialog", lambda dialog: dialog.accept())  # "leave the page?"
+        relay["on"] = True
+        page.page.reload()
+        page.page.wait_for_function("() => window.realpen && window.realpen.ready && "
+                                    "window.realpen.link.state === 'open' && "
+                                    "window.realpen.link.unacked === 0")
+        assert page.eval("realpen.stroke") == 2  # the same page: its numbers go on
+        assert page.problems == []
+    finally:
+        page.close()
+    strokes = store_rows(server, "SELECT page_stroke, sample_count, end_reason, page, id FROM "
+                                 "strokes WHERE id > ? ORDER BY id", before)
     assert [row[:1] + row[2:3] for row in strokes] == [(1, "pen_up"), (2, "pen_up")]
     assert strokes[0][3] == strokes[1][3]  # one page across the reload
     assert strokes[1][1] >= 40 and unacked >= 3  # pen-down, its samples, pen-up: all kept
-    xs = [x for (x,) in store_rows(server, "SELECT x FROM samples WHERE stroke_id = "
-                                           "(SELECT MAX(id) FROM strokes) ORDER BY seq")]
+    xs = [x for (x,) in store_rows(server, "SELECT x FROM samples WHERE stroke_id = ? "
+                                           "ORDER BY seq", strokes[1][4])]
     assert len(xs) == len(set(xs)) == strokes[1][1]
 
 
 # ---- pens whose audio is unusual or broken ----------------------------------------------------
 
-def test_a_pen_with_a_2_khz_tactile_pattern_loads_and_plays(browser, tmp_path):
+def test_a_pen_with_a_2_khz_tactile_pattern_loads_and_plays(browser, lan_server):
     """Chrome's decodeAudioData refuses WAVs below 3 kHz: the server resamples such patterns."""
-    low_rate_profile(tmp_path / "low")  # like `realpen profile build --rate 2000`
-    with serve(tmp_path, "--profiles", str(tmp_path / "low")) as low:
-        low.store = tmp_path / "strokes.sqlite3"
-        page = Page(browser, low, "?pen=slowpen&modality=tactile&tactile=audio")
-        try:
-            state = page.eval("({pen: realpen.pen, audio: realpen.audio, notice: realpen.notice,"
-                              " error: realpen.error})")
-            assert state["pen"] == "slowpen" and state["error"] is None
-            assert state["notice"] is None and state["audio"]["playing"] == "slowpen"
-            tactile = state["audio"]["buffers"]["tactile"]
-            assert tactile["duration"] == pytest.approx(1.5, abs=1e-3)  # 3000 frames at 2 kHz
-            page.stroke(writing(60), hold_s=0.12, lift=False)
-            held = page.eval("({tactile: realpen.tactileGain, target: realpen.tactileTarget, "
-                             "state: realpen.audio.state})")
-            assert held["state"] == "running" and held["target"] > 0
-            assert held["tactile"] == pytest.approx(held["target"], abs=1e-3)
-            page.pen("mouseReleased", 300, 220, 0.0, time.time())
-            page.settle()
-            assert page.eval("JSON.parse(localStorage.getItem('realpen.pen'))") == "slowpen"
-            assert page.problems == []
-        finally:
-            page.close()
+    page = Page(browser, lan_server, "&pen=slowpen&modality=tactile&tactile=audio")
+    try:
+        state = page.eval("({pen: realpen.pen, audio: realpen.audio, notice: realpen.notice,"
+                          " error: realpen.error})")
+        assert state["pen"] == "slowpen" and state["error"] is None
+        assert state["notice"] is None and state["audio"]["playing"] == "slowpen"
+        tactile = state["audio"]["buffers"]["tactile"]
+        assert tactile["duration"] == pytest.approx(1.5, abs=1e-3)  # 3000 frames at 2 kHz
+        page.stroke(writing(60), hold_s=0.12, lift=False)
+        held = page.eval("({tactile: realpen.tactileGain, target: realpen.tactileTarget, "
+                         "state: realpen.audio.state})")
+        assert held["state"] == "running" and held["target"] > 0
+        assert held["tactile"] == pytest.approx(held["target"], abs=1e-3)
+        page.pen("mouseReleased", 300, 220, 0.0, time.time())
+        page.settle()
+        assert page.eval("JSON.parse(localStorage.getItem('realpen.pen'))") == "slowpen"
+        assert page.problems == []
+    finally:
+        page.close()
 
 
 def test_picking_a_pen_whose_audio_fails_keeps_the_current_pen(open_page):

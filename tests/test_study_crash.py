@@ -8,15 +8,17 @@ the store is compared with what was acknowledged: every answer that got a 201 is
 
 from __future__ import annotations
 
+import concurrent.futures
+import contextlib
 import threading
 import time
 
 import httpx
 import pytest
-from live_support import serve, study_answers
+from live_support import serve, spare_server, study_answers
 from sqlalchemy import create_engine, text
 
-pytestmark = pytest.mark.slow  # three servers and a whole study per store: 15-25 s each
+pytestmark = pytest.mark.slow  # three servers and a whole study per store: 8-15 s each
 
 PARTICIPANTS = ("P01", "P02")
 KILLS = (20, 70)  # the server is killed once the clients have this many answers acknowledged
@@ -72,28 +74,35 @@ def _url(target) -> str:
 def test_no_acknowledged_answer_is_lost_or_doubled(tmp_path, store_target):
     people = [Participant(code) for code in PARTICIPANTS]
     in_flight = 0
-    for kill_after in KILLS:
-        with serve(tmp_path, "--store", str(store_target)) as server:
-            threads = [threading.Thread(target=_until_killed, args=(person, server.base))
-                       for person in people]
-            for thread in threads:
-                thread.start()
-            deadline = time.monotonic() + 60
-            while sum(len(p.acknowledged) for p in people) < kill_after and \
-                    time.monotonic() < deadline:
-                time.sleep(0.002)
-            server.process.kill()  # SIGKILL, with answers in flight
-            server.process.wait(timeout=10)
-            for thread in threads:
-                thread.join(timeout=20)
-        in_flight += sum(person.pending is not None for person in people)
-        assert sum(len(person.acknowledged) for person in people) >= kill_after
-    acknowledged_before = sum(len(person.acknowledged) for person in people)
-    with serve(tmp_path, "--store", str(store_target)) as server:
-        for person in people:
-            person.run(server.base)
-        progress = [httpx.get(f"{server.base}api/sessions/{person.session}").json()
-                    for person in people]
+    with contextlib.ExitStack() as unused:
+        # The three servers start at once: each restart then waits only for what follows
+        # Python's imports (the store opened and recovered, the port bound), as a user's would.
+        spares = [unused.enter_context(spare_server(tmp_path, "--store", str(store_target)))
+                  for _ in range(len(KILLS) + 1)]
+        for kill_after, spare in zip(KILLS, spares):
+            with serve(tmp_path, spare=spare) as server:
+                threads = [threading.Thread(target=_until_killed, args=(person, server.base))
+                           for person in people]
+                for thread in threads:
+                    thread.start()
+                deadline = time.monotonic() + 60
+                while sum(len(p.acknowledged) for p in people) < kill_after and \
+                        time.monotonic() < deadline:
+                    time.sleep(0.002)
+                server.process.kill()  # SIGKILL, with answers in flight
+                server.process.wait(timeout=10)
+                for thread in threads:
+                    thread.join(timeout=20)
+            in_flight += sum(person.pending is not None for person in people)
+            assert sum(len(person.acknowledged) for person in people) >= kill_after
+        acknowledged_before = sum(len(person.acknowledged) for person in people)
+        with serve(tmp_path, spare=spares[-1]) as server, \
+                concurrent.futures.ThreadPoolExecutor(len(people)) as clients:
+            # Both finish side by side, as they answered; result() raises what a client raised.
+            for finished in [clients.submit(person.run, server.base) for person in people]:
+                finished.result()
+            progress = [httpx.get(f"{server.base}api/sessions/{person.session}").json()
+                        for person in people]
     assert all(item["state"] == "finished" for item in progress)
     engine = create_engine(_url(store_target))
     try:

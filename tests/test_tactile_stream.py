@@ -158,16 +158,17 @@ def write_long(path: Path, minutes: float) -> None:
             out.write(chunk)
 
 
-def build_under_limit(tmp_path: Path, vibration: Path, sound: Path, limit: int | None,
-                      *extra: str) -> subprocess.CompletedProcess:
-    """``realpen profile build`` in a child whose address space is limited to ``limit`` bytes;
-    the child prints its VmPeak (kB) to stdout when it succeeds."""
+def start_build(tmp_path: Path, name: str, vibration: Path, sound: Path, limit: int | None,
+                *extra: str) -> subprocess.Popen:
+    """Start ``realpen profile build -o tmp_path/bundle-NAME`` in a child whose address space is
+    limited to ``limit`` bytes (:func:`finish` waits for it); the child prints its VmPeak (kB)
+    to stdout when it succeeds."""
     code = ("import sys, runpy; sys.argv = ['realpen'] + sys.argv[1:]\n"
             "try:\n    runpy.run_module('realpen', run_name='__main__')\n"
             "except SystemExit as done:\n"
             "    if done.code: raise\n"
             "print(next(l.split()[1] for l in open('/proc/self/status') if l.startswith('VmPeak')))\n")
-    out = tmp_path / f"bundle-{len(list(tmp_path.iterdir()))}"
+    out = tmp_path / f"bundle-{name}"
 
     def limit_address_space():
         if limit is not None:
@@ -175,10 +176,16 @@ def build_under_limit(tmp_path: Path, vibration: Path, sound: Path, limit: int |
 
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
            "MKL_NUM_THREADS": "1"}
-    return subprocess.run([sys.executable, "-c", code, "profile", "build", "--name", "long",
-                           "--vibration", str(vibration), "--sound", str(sound), "-o", str(out),
-                           *extra], capture_output=True, text=True, env=env, timeout=600,
-                          preexec_fn=limit_address_space)
+    return subprocess.Popen([sys.executable, "-c", code, "profile", "build", "--name", "long",
+                             "--vibration", str(vibration), "--sound", str(sound), "-o", str(out),
+                             *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, preexec_fn=limit_address_space)
+
+
+def finish(build: subprocess.Popen) -> subprocess.CompletedProcess:
+    """Wait for a :func:`start_build` child: its exit code, stdout and stderr."""
+    stdout, stderr = build.communicate(timeout=600)
+    return subprocess.CompletedProcess(build.args, build.returncode, stdout, stderr)
 
 
 @pytest.mark.slow
@@ -189,16 +196,20 @@ def test_a_profile_from_a_long_recording_fits_where_the_whole_signal_does_not(tm
     filtered copy take over 300 MB more than a short recording's build; streamed, a few MB."""
     short, long, sound = tmp_path / "short.wav", tmp_path / "long.wav", tmp_path / "sound.wav"
     write_long(short, 0.5)
-    write_long(long, 40)
     sf.write(sound, 0.1 * np.random.default_rng(1).standard_normal(48000), 48000)
-    baseline = build_under_limit(tmp_path, short, sound, None)
+    # The short build runs while the long file is written.
+    baseline = start_build(tmp_path, "short", short, sound, None)
+    write_long(long, 40)
+    baseline = finish(baseline)
     assert baseline.returncode == 0, baseline.stderr
     limit = (int(baseline.stdout.split()[-1]) + 150 * 1024) * 1024  # 150 MiB above a short build
-    streamed = build_under_limit(tmp_path, long, sound, limit)
+    # The two builds of the long file run side by side, each under its own limit.
+    streamed = start_build(tmp_path, "streamed", long, sound, limit)
+    # The in-memory path (resampling, here to the same rate, loads the whole signal) does not fit.
+    whole = finish(start_build(tmp_path, "whole", long, sound, limit, "--analysis-rate", "1344"))
+    streamed = finish(streamed)
     assert streamed.returncode == 0, streamed.stderr
     assert "wrote" in streamed.stdout
-    # The in-memory path (resampling, here to the same rate, loads the whole signal) does not fit.
-    whole = build_under_limit(tmp_path, long, sound, limit, "--analysis-rate", "1344")
     assert whole.returncode == 1, whole.stdout
     assert whole.stderr.startswith("realpen: error: out of memory") and \
         len(whole.stderr.strip().splitlines()) == 1, whole.stderr
