@@ -49,6 +49,7 @@ from realpen.stats.data import (
     outcomes,
 )
 from realpen.stats.intervals import cell_cis
+from realpen.stats.multiplicity import ADJUSTMENTS, adjusted_p
 from realpen.stats.nonparametric import friedman
 from realpen.stats.outcome import CELL_COLUMNS, CONFUSION_COLUMNS, PARTICIPANT_COLUMNS, StudyAnalysis
 from realpen.stats.paper import paper_numbers
@@ -69,7 +70,6 @@ FRIEDMAN_VARIANTS = {
 """What "a Friedman test of one factor blocked by the other" is reduced to; named in every
 output."""
 WILCOXON_METHODS = ("exact", "r", "spss")
-ADJUSTMENTS = ("holm", "bonferroni", "none")
 CI_METHODS = ("t", "bootstrap")
 SUPERPOSITION = "superposition"
 FLUCTUATION = "fluctuation"
@@ -424,9 +424,7 @@ def _factorial_friedman(outcome: Outcome, frame: pd.DataFrame, options: Analysis
 def _adjust(p: np.ndarray, method: str) -> np.ndarray:
     if method == "none" or len(p) < 2:
         return p
-    from statsmodels.stats.multitest import multipletests
-
-    return multipletests(p, method=method)[1]
+    return adjusted_p(p, method)
 
 
 # -- recognition and response times ------------------------------------------------------------

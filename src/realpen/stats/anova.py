@@ -8,7 +8,7 @@
   transform (:mod:`realpen.stats.art`) shares.
 - :func:`pairwise`: every pair of levels of one factor, paired t (pingouin) or Wilcoxon
   signed-rank (:func:`realpen.stats.nonparametric.wilcoxon`), Bonferroni or Holm adjusted
-  (statsmodels ``multipletests``).
+  (:mod:`realpen.stats.multiplicity`).
 
 Both take a long-format DataFrame with one row per subject × cell and refuse anything else with
 one line naming the subject and the cell (:class:`realpen.errors.ParameterError`). pingouin and
@@ -31,6 +31,7 @@ from realpen.checks import require_choice
 from realpen.errors import ParameterError
 from realpen.stats.contrasts import ZERO_FRACTION, anovarm_f, contrast_anova, effect_name, effects
 from realpen.stats.long import MAX_FACTORS, balanced_wide, factor_list, safe_long
+from realpen.stats.multiplicity import LIBRARY, adjusted_p
 from realpen.stats.nonparametric import WILCOXON_METHODS, wilcoxon
 from realpen.stats.results import TEST_COLUMNS, pair_label, tidy
 from realpen.stats.results import test_row as _result_row  # pytest would collect "test_row"
@@ -272,7 +273,7 @@ def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: st
     or its single value. ``test="t"``: paired t by :func:`pingouin.ttest` (``paired=True``), with
     Cohen's d_z = mean / SD of the differences (Lakens 2013); ``test="wilcoxon"``:
     :func:`realpen.stats.nonparametric.wilcoxon` with ``wilcoxon_method``. The p-values of all
-    pairs are adjusted together by :func:`statsmodels.stats.multitest.multipletests`
+    pairs are adjusted together by :func:`realpen.stats.multiplicity.adjusted_p`
     (``bonferroni``, ``holm``; ``none`` keeps them); a pair that cannot be tested (every
     difference zero) has NaN p and does not count in the family.
 
@@ -364,17 +365,13 @@ def pairwise(data: pd.DataFrame, *, dv: str, within: str, subject: str, test: st
                               p_adjusted=math.nan, adjust=adjust, **extras)
         rows.append(row)
     p_values = np.array([row["p"] for row in rows])
-    adjusted = p_values.copy()
     tested = np.isfinite(p_values)
-    if adjust != "none" and tested.any():
-        from statsmodels.stats.multitest import multipletests
-
-        adjusted[tested] = multipletests(p_values[tested], method=adjust)[1]
+    adjusted = adjusted_p(p_values, adjust)
     if adjust == "none":
         family = "; no multiplicity adjustment"
     else:
         family = (f"; {'Bonferroni' if adjust == 'bonferroni' else 'Holm'} over the "
-                  f"{int(tested.sum())} testable of {len(rows)} pairs (statsmodels multipletests)")
+                  f"{int(tested.sum())} testable of {len(rows)} pairs ({LIBRARY})")
     for row, value in zip(rows, adjusted):
         row["p_adjusted"] = float(value)
         row["method"] += family

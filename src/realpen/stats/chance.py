@@ -49,6 +49,7 @@ import scipy.stats
 from realpen.checks import require_choice
 from realpen.errors import ParameterError
 from realpen.stats.data import Outcome, Trials
+from realpen.stats.multiplicity import LIBRARY, adjusted_p
 from realpen.stats.nonparametric import WILCOXON_METHODS, wilcoxon
 from realpen.stats.results import test_row as _result_row  # pytest would collect "test_row"
 from realpen.stats.results import tidy, with_context
@@ -96,13 +97,7 @@ def chance_text(chance: float) -> str:
 
 def _adjusted(p: np.ndarray, adjust: str) -> np.ndarray:
     """``p`` adjusted over its finite values (NaN stays NaN and does not count)."""
-    adjusted = p.copy()
-    tested = np.isfinite(p)
-    if adjust != "none" and tested.sum() > 1:
-        from statsmodels.stats.multitest import multipletests
-
-        adjusted[tested] = multipletests(p[tested], method=adjust)[1]
-    return adjusted
+    return adjusted_p(p, adjust)
 
 
 def _family_words(adjust: str, tested: int, total: int) -> str:
@@ -110,7 +105,7 @@ def _family_words(adjust: str, tested: int, total: int) -> str:
         return "no multiplicity adjustment" if adjust == "none" else \
             "one testable level: no adjustment needed"
     name = "Bonferroni" if adjust == "bonferroni" else "Holm"
-    return f"{name} over the {tested} testable of {total} levels (statsmodels multipletests)"
+    return f"{name} over the {tested} testable of {total} levels ({LIBRARY})"
 
 
 def chance_tests(data: pd.DataFrame, *, dv: str, within: str | None, subject: str,
