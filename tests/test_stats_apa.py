@@ -43,9 +43,9 @@ def row(test: str, name: str, statistic: float, p: float, **more) -> dict:
      "t(11) = −2.31, p = .041 (Bonferroni-adjusted p = .123), d_z = −0.67"),
     (row("binomial GEE", "chi2", 12.3, 0.00213, df1=2), "χ²(2) = 12.30, p = .002"),
     (row("linear mixed model", "chi2", 0.0004, 0.99998, df1=4), "χ²(4) = 0.00, p > .999"),
-    (row("exact binomial", "k", 40, 0.0031, n=60, p_adjusted=0.0093, adjust="holm",
-         effect_size_name="cohen_h", effect_size=0.6911),
-     "p = .003 (k/n = 40/60; Holm-adjusted p = .009), h = 0.69"),
+    (row("exact binomial", "k", 31, 0.0037, n=60, p_adjusted=0.0111, adjust="holm",
+         effect_size_name="cohen_h", effect_size=0.3704),
+     "p = .004 (k/n = 31/60; Holm-adjusted p = .011), h = 0.37"),
     (row("paired t", "t", -0.0004, 0.9997, df1=11), "t(11) = 0.00, p > .999"),
     (row("Friedman", "chi2", NAN, NAN, df1=2), ""),
 ])

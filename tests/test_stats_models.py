@@ -97,6 +97,18 @@ def test_recognition_far_above_chance_is_significant_per_modality_and_pen(high):
     assert binomial["method"].str.contains("as independent").all()
 
 
+def test_a_chance_sentence_says_on_which_side_of_chance_a_level_lies(tmp_path):
+    trials = study2_trials(tmp_path, rates={"tactile": 0.05, "auditory": 0.9,
+                                            "audio-tactile": 0.9}, seed=8)
+    outcome = recognition_of(trials)
+    parts = recognition_chance(trials, outcome, trials.participants)
+    rows = pd.concat(parts)
+    rows = rows[rows["analysis"] == "chance/modality"].set_index("effect")
+    below, above = rows.loc["tactile", "apa"], rows.loc["auditory", "apa"]
+    assert below.startswith("M = ") and "correct against chance 1/3, T = " in below
+    assert float(below[4:].split(" %")[0]) < 100 / 3 < float(above[4:].split(" %")[0])
+
+
 def test_recognition_at_chance_is_mostly_not_significant():
     rejected = tested = 0
     model = ResponseModel(rates=dict.fromkeys(MODALITIES, 1 / 3))

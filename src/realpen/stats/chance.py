@@ -251,7 +251,11 @@ def recognition_chance(trials: Trials, outcome: Outcome, participants: Sequence[
         name = factor or ALL_TRIALS
         for family, suffix in (("participants", ""), ("trials", "/binomial")):
             rows = table[table["family"] == family]
-            parts.append(with_context(rows, analysis=f"chance/{name}{suffix}",
-                                      outcome=outcome.name, p_adjusted=rows["p_adjusted"],
-                                      adjust=adjust))
+            part = with_context(rows, analysis=f"chance/{name}{suffix}", outcome=outcome.name,
+                                p_adjusted=rows["p_adjusted"], adjust=adjust)
+            # T, z and r read the same above and below chance: the sentence says which side
+            part["apa"] = [f"M = {percent:.1f} % correct against chance {chance_text(chance)}, "
+                           f"{sentence}" if sentence else ""
+                           for percent, sentence in zip(rows["percent_correct"], part["apa"])]
+            parts.append(part)
     return parts

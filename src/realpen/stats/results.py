@@ -216,7 +216,7 @@ def apa_sentence(row: Mapping) -> str:
     true minus sign (−). A Wilcoxon signed-rank row (statistic ``T``) also gives z = −|r|·√n,
     the normal z of T as SPSS prints it, and r as |r| (the direction of a − b is the sign of
     ``effect_size``); an exact binomial test (statistic ``k``, ``n`` trials) is written
-    ``p = .003 (k/n = 40/60)`` (an adjusted p inside the parentheses).
+    ``p = .004 (k/n = 31/60)`` (an adjusted p inside the parentheses).
 
     Args:
         row: a mapping with ``test``, ``statistic_name``, ``statistic``, ``df1``, ``df2``,
