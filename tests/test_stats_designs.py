@@ -61,6 +61,18 @@ questions:
       - {phase: experimental, pens: all, repetitions: 2, randomise: true, task: "Write.",
          questions: [which, realism]}
 """,
+    # a modality × pen design written as one condition per cell
+    "conditions-name-cells": """pens: [pencil, ballpoint]
+modalities: [tactile, auditory]
+conditions: [{id: TP, modality: tactile, pen: pencil}, {id: TB, modality: tactile, pen: ballpoint},
+             {id: AP, modality: auditory, pen: pencil}, {id: AB, modality: auditory, pen: ballpoint}]
+questions:
+""" + _REALISM + """blocks:
+  - id: conditions
+    over: conditions
+    order: williams
+    trials: [{phase: experimental, task: "Write.", questions: [realism]}]
+""",
     "conditions-by-modalities": """pens: [ballpoint]
 modalities: [tactile, audio-tactile]
 conditions: [{id: B, tactile: B}, {id: E, tactile: E}]
@@ -194,3 +206,6 @@ def test_every_design_simulates_and_reports_or_says_what_is_missing(tmp_path, na
         assert set(pairs["effect"]) == {"B vs E", f"B vs {NO_CONDITION}", f"E vs {NO_CONDITION}"}
     if name == "conditions-by-modalities":
         assert "art/condition:modality" in set(table["analysis"])
+    if name == "conditions-name-cells":  # the crossed factors, their interaction included
+        assert "art/modality:pen" in set(table["analysis"])
+        assert "each condition is one modality × pen cell" in html

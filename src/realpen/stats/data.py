@@ -514,6 +514,20 @@ def _fixes(cells: list[tuple[str, ...]], by: int, of: int) -> bool:
     return all(seen.setdefault(cell[by], cell[of]) == cell[of] for cell in cells)
 
 
+def _names_crossed_cells(cells: list[tuple[str, ...]], condition: int, others: list[int]) -> bool:
+    """Whether each condition is one combination of the ``others`` columns and back, and every
+    combination of theirs is planned (the conditions only name a crossed design's cells)."""
+    of_condition: dict[str, tuple[str, ...]] = {}
+    of_combination: dict[tuple[str, ...], str] = {}
+    for cell in cells:
+        combination = tuple(cell[i] for i in others)
+        if of_condition.setdefault(cell[condition], combination) != combination or \
+                of_combination.setdefault(combination, cell[condition]) != cell[condition]:
+            return False
+    full = math.prod(len({cell[i] for cell in cells}) for i in others)
+    return len(of_combination) == full
+
+
 def _structure(cells: list[tuple[str, ...]]
                ) -> tuple[list[str], dict[str, str], dict[str, str], tuple[str, ...]]:
     """An outcome's ``(factors, nested, constant, averaged)`` from its planned
@@ -529,6 +543,9 @@ def _structure(cells: list[tuple[str, ...]]
     >>> _structure([("tactile", "tactile", p) for p in "ab"] + [("auditory", "auditory", p)
     ...            for p in "ab"])
     (['modality', 'pen'], {}, {}, ())
+    >>> _structure([("c1", "tactile", "a"), ("c2", "auditory", "a"), ("c3", "tactile", "b"),
+    ...             ("c4", "auditory", "b")])
+    (['modality', 'pen'], {'condition': 'modality × pen'}, {}, ())
     """
     varying = [i for i in range(len(FACTOR_COLUMNS)) if len({cell[i] for cell in cells}) > 1]
     constant = {FACTOR_COLUMNS[i]: cells[0][i] for i in range(len(FACTOR_COLUMNS))
@@ -538,6 +555,13 @@ def _structure(cells: list[tuple[str, ...]]
             all(cell[condition] == cell[modality] for cell in cells):
         varying.remove(condition)  # a block over modalities names its level twice
     nested: dict[str, str] = {}
+    others = [i for i in varying if i != condition]
+    if condition in varying and len(others) >= 2 and _names_crossed_cells(cells, condition,
+                                                                           others):
+        # conditions written one per cell of a crossed design (tactile+pencil, tactile+marker,
+        # …): the crossed columns are the factors, so their interaction is tested too
+        varying.remove(condition)
+        nested[FACTOR_COLUMNS[condition]] = " × ".join(FACTOR_COLUMNS[i] for i in others)
     for first, second in itertools.combinations(list(varying), 2):
         if first not in varying or second not in varying:
             continue
@@ -575,8 +599,11 @@ def factor_text(outcome: Outcome) -> str:
     else:
         text = f"{outcome.name}: {' × '.join(sizes)}, crossed within participants"
     for name, by in outcome.nested.items():
-        text += (f"; {name} nested in {by} (each {by} fixes its {name}): not a factor of its "
-                 f"own")
+        if " × " in by:
+            text += f"; each {name} is one {by} cell: the crossed factors are tested, not {name}"
+        else:
+            text += (f"; {name} nested in {by} (each {by} fixes its {name}): not a factor of "
+                     f"its own")
     if outcome.averaged:
         text += (f"; {', '.join(outcome.averaged)} varies within {outcome.factors[0]} but is "
                  f"not crossed with it (not every combination is planned): each participant's "
