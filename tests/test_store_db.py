@@ -16,7 +16,7 @@ from sqlalchemy import Float, create_engine, insert, make_url, select, text
 from sqlalchemy.exc import DBAPIError, IntegrityError, OperationalError, ResourceClosedError
 from sqlalchemy.pool import NullPool
 
-from realpen.errors import RealPenError
+from realpen.errors import ParameterError, RealPenError
 from realpen.live.store import StrokeStore, export_csv
 from realpen.study.db import SQLITE_USER_VERSION, head_revision, hide_password, open_database
 from realpen.study.export import export_trials
@@ -100,8 +100,8 @@ def test_strokes_carry_their_study_trial(store_target):
         study = store.begin_stroke(session="s", page_stroke=2, page_t0=0.0, study_session=session,
                                    trial=3, **STROKE)
         assert plain != study
-        # A session that does not exist is refused (a foreign key), on both databases.
-        with pytest.raises(IntegrityError):
+        # A session that does not exist is refused before the insert, on both databases.
+        with pytest.raises(ParameterError, match=f"study session {session + 1} is gone"):
             store.begin_stroke(session="s", page_stroke=3, page_t0=0.0, study_session=session + 1,
                                trial=1, **STROKE)
     finally:

@@ -58,14 +58,19 @@ from realpen.io.strokes import SAMPLE_FIELDS, StrokeSample
 from realpen.live.writer import CHECKPOINT_S, WAL_CHECKPOINT_BYTES, BatchWriter, Statement
 from realpen.study.db import STORE_ERRORS, Database, error_line, open_database, store_file
 from realpen.study.tables import END_REASONS, samples, strokes
+from realpen.study.tables import sessions as study_sessions
 
 __all__ = ["StrokeStore", "StrokeRef", "export_csv", "SAMPLE_FIELDS", "STROKE_FIELDS",
-           "CSV_COLUMNS", "SHUTDOWN_WAIT_S", "END_REASONS"]
+           "CSV_COLUMNS", "SHUTDOWN_WAIT_S", "END_REASONS", "CLOSED_STUDY_STATES"]
 
 SHUTDOWN_WAIT_S = 30.0  # how long a server's shutdown waits for the database to answer
 # Held shared by every live store on a PostgreSQL database; a store that can take it exclusively
 # is alone, so strokes left open there were left by a server that died (an arbitrary 64-bit key).
 _PRESENCE_LOCK = 0x5245_414C_5045_4E02
+CLOSED_STUDY_STATES = ("withdrawn", "abandoned")
+"""Study-session states that take no more strokes (a finished session still takes the tail of
+its last trial's stroke, which may arrive after the answer)."""
+
 log = logging.getLogger(__name__)
 # ``page`` (the page's own id, within which ``page_stroke`` counts) was ``session`` before: the
 # export's one "session" is now the study export's, a participant's session of a design.
@@ -166,6 +171,7 @@ class StrokeStore:
             ("sample_count", _SAMPLE_COUNT), ("add_count", _ADD_COUNT),
             ("insert_samples", _INSERT_SAMPLES[self.dialect]))}
         self._t0: dict[int, float] = {}  # stroke id → page t0 (writer thread only)
+        self._study_of: dict[int, int | None] = {}  # stroke id → its study session (ditto)
         # Strokes this store began and has not ended (writer thread only): on PostgreSQL other
         # servers' strokes are open too, and closing ends only these.
         self._open: set[int] = set()
@@ -174,7 +180,7 @@ class StrokeStore:
             self.recovered = self._close_crashed_strokes()
             # A batch rolled back whole: the t0 of a stroke it began is not stored.
             self.writer = BatchWriter(self.database, checkpoint_s, wal_checkpoint_bytes,
-                                      name="stroke store", on_batch_lost=self._t0.clear)
+                                      name="stroke store", on_batch_lost=self._forget_strokes)
         except BaseException:
             self._release_presence()
             self.database.close()
@@ -254,7 +260,30 @@ class StrokeStore:
 
     # ---- operations (run on the writer thread, inside a transaction) --------------------
 
+    def _require_open_study(self, conn: Connection, study_session: int) -> None:
+        """Refuse a stroke (or its samples) for a study session that is withdrawn, abandoned
+        or gone: checked in the stroke's own transaction, the session row shared-locked on
+        PostgreSQL, so a withdrawal on another server cannot slip between check and write."""
+        row = conn.execute(select(study_sessions.c.state)
+                           .where(study_sessions.c.id == study_session)
+                           .with_for_update(read=True)).first()
+        if row is None or row[0] in CLOSED_STUDY_STATES:
+            state = "gone" if row is None else row[0]
+            raise ParameterError("study_session", f"study session {study_session} is {state}: "
+                                                  f"it takes no strokes")
+
+    def _study_session_of(self, conn: Connection, stroke_id: int) -> int | None:
+        if stroke_id not in self._study_of:
+            found = conn.execute(select(strokes.c.study_session)
+                                 .where(strokes.c.id == stroke_id)).first()
+            if found is None:  # deleted with a withdrawn participant's data
+                raise ParameterError("stroke", f"stroke {stroke_id} is no longer stored")
+            self._study_of[stroke_id] = found[0]
+        return self._study_of[stroke_id]
+
     def _begin(self, conn: Connection, fields: dict) -> int:
+        if fields["study_session"] is not None:
+            self._require_open_study(conn, fields["study_session"])
         row = self.writer.execute(conn, self._sql["by_page"], {
             "page": fields["page"], "page_stroke": fields["page_stroke"]}).fetchone()
         if row is not None:  # the page sent this pen-down before (a resend after a reconnect)
@@ -267,6 +296,7 @@ class StrokeStore:
             return int(stroke_id)
         result = conn.execute(strokes.insert().values(**fields, started_at=_now()))
         stroke_id = int(result.inserted_primary_key[0])
+        self._study_of[stroke_id] = fields["study_session"]
         self._t0[stroke_id] = fields["page_t0"]
         self._open.add(stroke_id)
         return stroke_id
@@ -274,6 +304,9 @@ class StrokeStore:
     def _append(self, conn: Connection, stroke_id: int, rows: list[tuple],
                 first: int | None) -> int:
         sql, key = self._sql, {"stroke": stroke_id}
+        study_session = self._study_session_of(conn, stroke_id)
+        if study_session is not None:
+            self._require_open_study(conn, study_session)
         t0 = self._t0.get(stroke_id)
         if t0 is None:
             found = self.writer.execute(conn, sql["t0"], key).fetchone()
@@ -303,6 +336,7 @@ class StrokeStore:
         result = conn.execute(update(strokes).where(strokes.c.id == stroke_id, still_open).values(
             ended_at=_now(), end_reason=reason))
         self._t0.pop(stroke_id, None)
+        self._study_of.pop(stroke_id, None)
         self._open.discard(stroke_id)
         return result.rowcount > 0
 
@@ -312,9 +346,15 @@ class StrokeStore:
             still_open = still_open & strokes.c.id.in_(sorted(self._open))
         result = conn.execute(update(strokes).where(still_open).values(
             ended_at=_now(), end_reason=reason))
-        self._t0.clear()
+        self._forget_strokes()
         self._open.clear()
         return result.rowcount
+
+    def _forget_strokes(self) -> None:
+        """Drop what is cached of strokes (their t0, their study session): a batch rolled back
+        whole may have begun some that are not stored."""
+        self._t0.clear()
+        self._study_of.clear()
 
     def _find(self, conn: Connection, page: str, page_stroke: int) -> StrokeRef | None:
         row = self.writer.execute(conn, self._sql["by_page"],

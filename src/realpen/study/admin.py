@@ -78,6 +78,11 @@ def withdraw(conn: Connection, session_id: int, confirm: str, cache: DesignCache
         StudyInvalid: ``confirm`` is not the session's participant ID.
         StudyConflict: the session is withdrawn already.
     """
+    # The session row locked first (PostgreSQL; SQLite has one writer): a stroke that another
+    # server is storing for it either commits before this or sees the session withdrawn.
+    if conn.execute(select(sessions.c.id).where(sessions.c.id == session_id)
+                    .with_for_update()).first() is None:
+        raise StudyNotFound(f"no session {session_id}")
     row = conn.execute(
         select(sessions.c.state, sessions.c.participant_id, participants.c.code)
         .join(participants, sessions.c.participant_id == participants.c.id)

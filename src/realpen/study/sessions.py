@@ -26,6 +26,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
@@ -60,6 +61,9 @@ LIVE_MODALITY = {name: name for name in MODALITIES}
 MAX_RT_MS = 24 * 3600 * 1000.0  # a response time beyond a day is a clock error, not an answer
 MAX_CODE_CHARS = 64
 MAX_SITE_CHARS = 200
+WITHDRAWN_CODE = re.compile(r"withdrawn-[0-9]+")
+"""What a withdrawn participant's ID becomes in the store (``withdrawn-<session>``): refused
+as a new participant's ID, so a withdrawal never collides with one."""
 SETTABLE_STATES = tuple(state for state in SESSION_STATES if state != "withdrawn")
 """The states :func:`set_state` sets; ``withdrawn`` is :func:`realpen.study.admin.withdraw`'s."""
 
@@ -160,6 +164,9 @@ class SessionRequest:
                                       or not storable(value)):
                 raise StudyInvalid(f"demographics.{name}: at most 100 characters of text "
                                    f"(no NUL, no unpaired surrogate)")
+        if WITHDRAWN_CODE.fullmatch(code):
+            raise StudyInvalid(f"participant: '{code}' is how the store names a withdrawn "
+                               f"participant's record; give another ID")
         unknown = set(self.demographics) - {"age", "gender", "handedness"}
         if unknown:
             raise StudyInvalid(f"demographics: unknown field '{sorted(unknown)[0]}' (age, "
@@ -247,7 +254,12 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
         conn.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": _design_key(design.name)})
     existing = _existing_session(conn, design.name, code)
     if existing is not None:
-        return progress(conn, existing, cache), False
+        found = progress(conn, existing, cache)
+        if found["pilot"] != bool(request.pilot):
+            kind, other = ("a pilot", "a real") if found["pilot"] else ("a real", "a pilot")
+            raise StudyConflict(f"{code} already has {kind} session ({existing}) of "
+                                f"'{design.name}'; {other} session needs another participant ID")
+        return found, False
     if design.participant_fields.consent and request.consent is not True:
         raise StudyInvalid(f"consent: the design '{design.name}' asks for the participant's "
                            f"consent before the session starts")
@@ -281,7 +293,12 @@ def open_session(conn: Connection, design: Design, request: SessionRequest,
     return progress(conn, session_id, cache), True
 
 
-def _session_row(conn: Connection, session_id: int):
+def _session_row(conn: Connection, session_id: int, *, lock: bool = False):
+    """The session's row with its design's name and participant's ID; ``lock``: first lock
+    the session row until the transaction ends (PostgreSQL's FOR UPDATE; SQLite has one
+    writer), so that two servers cannot answer, end or withdraw it at once."""
+    if lock:
+        conn.execute(select(sessions.c.id).where(sessions.c.id == session_id).with_for_update())
     row = conn.execute(_session_rows().where(sessions.c.id == session_id)).mappings().first()
     if row is None:
         raise StudyNotFound(f"no session {session_id}")
@@ -549,7 +566,7 @@ def answer_trial(conn: Connection, session_id: int, n: int, given: dict, rt_ms: 
             abandoned, withdrawn).
         StudyInvalid: an invalid answer (the detail names the question) or response time.
     """
-    row = _session_row(conn, session_id)
+    row = _session_row(conn, session_id, lock=True)
     plan_json = conn.execute(select(trials.c.plan, trials.c.answered_at).where(
         trials.c.session_id == session_id, trials.c.n == n)).first()
     if plan_json is None:
@@ -587,7 +604,8 @@ def answer_trial(conn: Connection, session_id: int, n: int, given: dict, rt_ms: 
                                        for question, text, correct in rows])
     following = _first_unanswered(conn, session_id)
     if following is None:
-        conn.execute(update(sessions).where(sessions.c.id == session_id)
+        conn.execute(update(sessions).where(sessions.c.id == session_id,
+                                            sessions.c.state.not_in(ENDED_STATES))
                      .values(state="finished", finished_at=answered_at))
     reply = {"trial": n, "next": following}
     if plan.feedback:
@@ -611,7 +629,7 @@ def set_state(conn: Connection, session_id: int, state: str, cache: DesignCache)
     """
     if state not in SETTABLE_STATES:
         raise StudyInvalid(f"state: must be one of {', '.join(SETTABLE_STATES)}")
-    row = _session_row(conn, session_id)
+    row = _session_row(conn, session_id, lock=True)
     if row["state"] in ENDED_STATES and state != row["state"]:
         raise StudyConflict(f"session {session_id} is {row['state']} and cannot be "
                             f"{'resumed' if state in ('running', 'paused') else state}")
