@@ -118,6 +118,7 @@ def test_the_participant_qr_code_holds_the_address_with_the_token(lan_client):
     assert reply.headers["content-type"] == "image/svg+xml"
     assert "frame-ancestors 'none'" in reply.headers["content-security-policy"]
     assert reply.headers["x-content-type-options"] == "nosniff"
+    assert reply.headers["cache-control"] == "no-store"  # it holds the token
     address = f"{LAN_BASE}/study/participant?session={session}&token={TOKEN}"
     assert reply.content == segno_svg(address, session)
     assert reply.content.startswith(b"<svg") and b"<script" not in reply.content
@@ -128,9 +129,13 @@ def test_the_participant_qr_code_holds_the_address_with_the_token(lan_client):
 
 
 def test_without_a_token_the_qr_code_holds_the_plain_address(client):
-    reply = client.get("/api/sessions/7/participant-qr.svg")
+    assert client.get("/api/sessions/7/participant-qr.svg").status_code == 404  # no session 7
+    session = client.post("/api/sessions", json={"design": "study1", "participant": "P01",
+                                                 "consent": True}).json()["session"]
+    reply = client.get(f"/api/sessions/{session}/participant-qr.svg")
     assert reply.status_code == 200
-    assert reply.content == segno_svg("http://127.0.0.1/study/participant?session=7", 7)
+    assert reply.content == segno_svg(
+        f"http://127.0.0.1/study/participant?session={session}", session)
     assert client.get("/api/sessions/7x/participant-qr.svg").status_code == 422
 
 

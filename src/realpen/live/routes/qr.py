@@ -25,7 +25,9 @@ from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
 from realpen.live.routes.params import STORED_ID
+from realpen.live.routes.studies import read_store
 from realpen.live.state import State
+from realpen.study.sessions import progress as session_progress
 
 __all__ = ["router", "ERROR_LEVEL", "SVG_OPTIONS", "participant_url", "qr_svg"]
 
@@ -82,7 +84,9 @@ def qr_svg(text: str, *, title: str = "") -> bytes:
 
 
 @router.get("/api/sessions/{session_id}/participant-qr.svg")
-def participant_qr(state: State, request: Request, session_id: STORED_ID) -> Response:
+async def participant_qr(state: State, request: Request, session_id: STORED_ID) -> Response:
+    await read_store(state, session_progress, session_id, state.design_cache)  # 404 if none
     url = participant_url(str(request.base_url), session_id, state.settings.token)
     svg = qr_svg(url, title=f"The participant screen of session {session_id}")
-    return Response(svg, media_type="image/svg+xml", headers={"Cache-Control": "no-cache"})
+    # it may hold the LAN token: no cache keeps a copy
+    return Response(svg, media_type="image/svg+xml", headers={"Cache-Control": "no-store"})

@@ -45,7 +45,7 @@ from realpen.study.db import STORE_ERRORS, error_line
 from realpen.study.design import MAX_ANSWER_CHARS, Design
 from realpen.study.patterns import PatternCache
 
-__all__ = ["router", "load_designs", "SessionBody", "AnswerBody", "StateBody", "WithdrawBody",
+__all__ = ["router", "load_designs", "read_store", "SessionBody", "AnswerBody", "StateBody", "WithdrawBody",
            "REQUEST_WAIT_S"]
 
 REQUEST_WAIT_S = 30.0  # a request waits at most this long for the store, then gets 503
@@ -133,7 +133,7 @@ async def _write(state: State, operation, *args):
     return await _committed(state.store.submit(operation, *args))
 
 
-async def _read(state: State, operation, *args):
+async def read_store(state: State, operation, *args):
     """A reading operation: beside the writer, never behind its commits."""
     return await _committed(state.store.read(operation, *args))
 
@@ -183,18 +183,18 @@ async def open_session(state: State, body: SessionBody) -> JSONResponse:
 
 @router.get("/api/sessions")
 async def sessions_list(state: State, limit: url_int(1, 1000) = 200) -> Response:
-    return JSONResponse({"sessions": await _read(state, study.list_sessions, state.design_cache,
+    return JSONResponse({"sessions": await read_store(state, study.list_sessions, state.design_cache,
                                                  limit)})
 
 
 @router.get("/api/sessions/{session_id}")
 async def session_progress(state: State, session_id: Id) -> Response:
-    return JSONResponse(await _read(state, study.progress, session_id, state.design_cache))
+    return JSONResponse(await read_store(state, study.progress, session_id, state.design_cache))
 
 
 @router.get("/api/sessions/{session_id}/next")
 async def next_trial(state: State, session_id: Id) -> Response:
-    return JSONResponse(await _read(state, study.next_trial, session_id, state.design_cache))
+    return JSONResponse(await read_store(state, study.next_trial, session_id, state.design_cache))
 
 
 @router.post("/api/sessions/{session_id}/trials/{n}")
@@ -218,7 +218,7 @@ async def withdraw(state: State, session_id: Id, body: WithdrawBody) -> Response
 
 @router.get("/api/sessions/{session_id}/trials/{n}/tactile.wav")
 async def trial_tactile(state: State, session_id: Id, n: Id) -> Response:
-    trial, design = await _read(state, study.trial_plan, session_id, n, state.design_cache)
+    trial, design = await read_store(state, study.trial_plan, session_id, n, state.design_cache)
     profile = study.pen_profile(design, trial.pen)
     entry = state.catalog.get(profile)
     if entry is None:
