@@ -426,3 +426,37 @@ def test_strokes_export_and_serve_take_a_postgresql_url(postgres_server, tmp_pat
         printed = served.stop()
     assert f"store: {hide_password(with_password)}" in printed and "postgres:***@" in printed
     assert "stopped: the store holds 1 strokes, 5 samples" in printed and "hunter2" not in printed
+
+
+def _migrate(target, direction: str, revision: str) -> None:
+    from realpen.study.db import _alembic
+
+    database = open_database(target, create=False)
+    try:
+        with database.engine.connect() as conn:
+            conn.connection.driver_connection.execute("PRAGMA foreign_keys=OFF")
+            with conn.begin():
+                _alembic(conn, direction, revision)
+    finally:
+        database.close()
+
+
+def test_revision_0003_goes_down_and_up_with_sessions_but_refuses_to_lose_pilots(tmp_path):
+    from realpen.study import admin
+    from realpen.study import sessions as study
+    from realpen.study.design import load_design
+
+    target, cache, design = tmp_path / "s.sqlite3", study.DesignCache(), load_design("study1")
+    admin.on_store(target, study.open_session, design,
+                   study.SessionRequest("P01", consent=True), cache, create=True)
+    _migrate(target, "downgrade", "0002")
+    assert store_rows(target, "SELECT version_num FROM alembic_version") == [("0002",)]
+    _migrate(target, "upgrade", "0003")  # a store of 0002 with a session in it
+    assert store_rows(target, "SELECT id, plan_index, pilot, withdrawn_at, state FROM sessions") \
+        == [(1, 0, 0, None, "running")]
+    admin.on_store(target, study.open_session, design,
+                   study.SessionRequest("PILOT1", consent=True, pilot=True), cache)
+    with pytest.raises(RuntimeError, match="holds 1 pilot session"):
+        _migrate(target, "downgrade", "0002")
+    assert store_rows(target, "SELECT version_num FROM alembic_version") == [("0003",)]
+    assert store_rows(target, "SELECT COUNT(*) FROM sessions") == [(2,)]

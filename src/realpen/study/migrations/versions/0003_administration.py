@@ -40,6 +40,17 @@ def upgrade() -> None:
 
 
 def downgrade() -> None:
+    # Revision 0002 has one session per plan row and knows neither pilots nor withdrawals: a
+    # store that holds any cannot go back without losing what they mean, so it is refused.
+    counts = op.get_bind().execute(sa.text(
+        "SELECT SUM(CASE WHEN pilot THEN 1 ELSE 0 END), "
+        "SUM(CASE WHEN state IN ('withdrawn', 'abandoned') THEN 1 ELSE 0 END) "
+        "FROM sessions")).one()
+    pilots, ended = int(counts[0] or 0), int(counts[1] or 0)
+    if pilots or ended:
+        raise RuntimeError(f"cannot downgrade below revision 0003: the store holds {pilots} "
+                           f"pilot session(s) and {ended} withdrawn or abandoned session(s), "
+                           f"which revision 0002 cannot hold; export and remove them first")
     op.drop_index("sessions_by_plan_row", table_name="sessions")
     with op.batch_alter_table("sessions") as batch:
         batch.create_unique_constraint("uq_sessions_study_id_plan_index",
