@@ -92,3 +92,19 @@ def test_a_withdrawn_records_name_is_not_a_participant_id(client):
         == 200
     assert client.post(f"/api/sessions/{second}/withdraw", json={"confirm": "P06"}).status_code \
         == 200
+
+
+def test_the_strokes_export_leaves_pilot_sessions_out_unless_asked(client, store_path, tmp_path):
+    from realpen.live.store import export_csv
+
+    real, pilot = start(client, "P07"), start(client, "P08", pilot=True)
+    with client.websocket_connect(WS) as ws:
+        for stroke, session in enumerate((real, pilot)):
+            assert talk(ws, pen_down(session, stroke, 3 * stroke + 1))["type"] == "ack"
+            batch = {"type": "samples", "seq": 3 * stroke + 2, "stroke": stroke,
+                     "samples": [SAMPLE]}
+            assert talk(ws, batch)["type"] == "ack"
+            assert talk(ws, {"type": "pen_up", "seq": 3 * stroke + 3, "stroke": stroke,
+                             "t": 1.4})["type"] == "ack"
+    assert export_csv(store_path, tmp_path / "real.csv") == (1, 1)
+    assert export_csv(store_path, tmp_path / "all.csv", include_pilot=True) == (2, 2)

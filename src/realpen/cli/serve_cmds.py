@@ -164,6 +164,9 @@ def export(
     stroke: int | None = typer.Option(
         None, "--stroke", help="Only this stroke (its id in the store): a trajectory for "
                                "`realpen sound render`."),
+    include_pilot: bool = typer.Option(
+        False, "--include-pilot", help="Also the strokes of pilot study sessions (left out "
+                                       "by default, as `realpen study export` leaves them out)."),
     force: bool = force_option(),
 ) -> None:
     """Write the stored strokes as CSV: stroke, page, pen, modality, …, t, x, y, pressure, tilt, speed."""
@@ -176,7 +179,7 @@ def export(
     check_outputs(output, force=force, inputs={} if file is None else {
         "stroke store": file, **{f"stroke store's {suffix} file": Path(f"{file}{suffix}")
                                  for suffix in ("-wal", "-shm", "-journal")}})
-    strokes, rows = export_csv(store, output, stroke)
+    strokes, rows = export_csv(store, output, stroke, include_pilot)
     console.print(f"wrote {output}: {rows} samples of {strokes} strokes from "
                   f"{hide_password(store)}", highlight=False)
 

@@ -472,7 +472,7 @@ class StrokeStore:
             self.database.remove_files()
 
 
-def _rows(conn: Connection, stroke: int | None) -> Iterable[tuple]:
+def _rows(conn: Connection, stroke: int | None, include_pilot: bool = False) -> Iterable[tuple]:
     # A stroke stored before pages named themselves (a store of the first schema has no such
     # column, and is read as it is) has only its connection's id; one stored by an earlier
     # release may say "auditory-tactile": the CSV says today's name.
@@ -487,12 +487,24 @@ def _rows(conn: Connection, stroke: int | None) -> Iterable[tuple]:
         strokes, samples, samples.c.stroke_id == strokes.c.id).order_by(strokes.c.id, samples.c.seq)
     if stroke is not None:
         query = query.where(strokes.c.id == stroke)
+    if not include_pilot and _has_pilots(conn):
+        pilots = select(study_sessions.c.id).where(study_sessions.c.pilot)
+        query = query.where(strokes.c.study_session.is_(None)
+                            | strokes.c.study_session.not_in(pilots))
     # In pages: a long store is never held in memory whole (a server-side cursor on PostgreSQL).
     return conn.execution_options(yield_per=4096).execute(query)
 
 
+def _has_pilots(conn: Connection) -> bool:
+    """Whether the store knows pilot sessions (revision 0003 on; an older one has none)."""
+    inspector = inspect(conn)
+    return inspector.has_table("sessions") and \
+        "pilot" in {column["name"] for column in inspector.get_columns("sessions")} and \
+        "study_session" in {column["name"] for column in inspector.get_columns("strokes")}
+
+
 def export_csv(store: str | os.PathLike, output: str | os.PathLike,
-               stroke: int | None = None) -> tuple[int, int]:
+               stroke: int | None = None, include_pilot: bool = False) -> tuple[int, int]:
     """Write one CSV row per sample (columns :data:`CSV_COLUMNS`) atomically.
 
     ``stroke`` is the stroke's id in the store; ``page`` the id of the page that drew it (the
@@ -506,6 +518,8 @@ def export_csv(store: str | os.PathLike, output: str | os.PathLike,
         store: the store: an SQLite file or a database URL.
         output: the CSV file to write.
         stroke: only this stroke (its id in the store).
+        include_pilot: also the strokes of pilot study sessions (left out by default, as
+            ``realpen study export`` leaves them out).
 
     Returns:
         (strokes, rows) written.
@@ -531,7 +545,7 @@ def export_csv(store: str | os.PathLike, output: str | os.PathLike,
                 with open(tmp, "w", newline="", encoding="utf-8") as handle:
                     writer = csv.writer(handle)
                     writer.writerow(CSV_COLUMNS)
-                    for row in _rows(conn, stroke):
+                    for row in _rows(conn, stroke, include_pilot):
                         writer.writerow(row)
                         written.add(row[0])
                         rows += 1
