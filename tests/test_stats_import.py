@@ -24,6 +24,9 @@ from realpen.stats.data import read_trials
 from realpen.stats.simulate import ResponseModel, simulated_trials
 from realpen.study.design import load_design
 
+# seconds each (simulate, analyse, report): with the long modules, not in --fast
+pytestmark = pytest.mark.slow
+
 STUDY1 = load_design("study1")
 STUDY2 = load_design("study2")
 
