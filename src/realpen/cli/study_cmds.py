@@ -206,11 +206,11 @@ def withdraw(
     """Withdraw a participant who takes back consent: their answers, strokes and demographics
     are deleted in one transaction; the session stays as a record (state withdrawn, the time,
     no data) and its plan row goes to the next participant."""
-    from realpen.study.admin import find_session, on_store, withdraw
+    from realpen.study.admin import on_store, withdraw
     from realpen.study.sessions import DesignCache
 
     def operation(conn):
-        session_id = find_session(conn, session, study)
+        session_id = _find(conn, session, study)
         # Named by the participant's ID: that is the confirmation.
         typed = confirm if confirm is not None else (session if study is not None else None)
         if typed is None:
@@ -226,6 +226,21 @@ def withdraw(
                   highlight=False)
 
 
+def _find(conn, session: str, study: str | None) -> int:
+    """The session named on the command line, with the option that names one by its
+    participant's ID in the error when it was not given."""
+    from realpen.study.admin import find_session
+    from realpen.study.sessions import StudyNotFound
+
+    try:
+        return find_session(conn, session, study)
+    except StudyNotFound as error:
+        if study is None:
+            raise StudyNotFound(f"{error}; give --study NAME to name a session by its "
+                                f"participant's ID") from None
+        raise
+
+
 @study_app.command("abandon")
 def abandon(
     session: str | None = typer.Argument(None, metavar="[SESSION]", help=SESSION_HELP),
@@ -239,7 +254,7 @@ def abandon(
 ) -> None:
     """End a session the participant left as abandoned (its answers are kept and exported with
     that state; it cannot be resumed), or, with --stale, every session idle that long."""
-    from realpen.study.admin import abandon_stale, find_session, on_store
+    from realpen.study.admin import abandon_stale, on_store
     from realpen.study.sessions import DesignCache, StudyInvalid, set_state
 
     if (session is None) == (stale is None):
@@ -255,7 +270,7 @@ def abandon(
         return
 
     def operation(conn):
-        return set_state(conn, find_session(conn, session, study), "abandoned", DesignCache())
+        return set_state(conn, _find(conn, session, study), "abandoned", DesignCache())
 
     progress = on_store(_store(store), operation)
     console.print(f"abandoned {_session_line(progress)}", highlight=False)

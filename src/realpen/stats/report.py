@@ -407,7 +407,7 @@ def _paper_section(analysis) -> str:
     return ('<section id="paper"><h2>The paper\'s numbers beside ours</h2>'
             "<p>Each comparison written the same way for the paper and for us (a dash: not "
             "given). Where the paper's choice differs from ours, the paper-compatible row that "
-            "repeats it is listed too (with --paper-compatible).</p>"
+            "repeats it is listed too, when the analysis gives the paper-compatible numbers.</p>"
             + _table(("analysis", "outcome", "effect", "paper", "ours", "note"), rows,
                      keys=(0, 1, 2))
             + "<details><summary>Every number (paper.csv)</summary>"

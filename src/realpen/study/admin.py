@@ -172,7 +172,7 @@ def find_session(conn: Connection, session: str, design: str | None = None) -> i
         if found is not None:
             return found
     where = f" of the design '{design}'" if design is not None else \
-        " (give --study NAME to name a session by its participant's ID)"
+        " (a participant's ID names a session only with its design)"
     raise StudyNotFound(f"no session '{text}'{where}")
 
 

@@ -458,7 +458,7 @@ _STATES = {
 }
 _PILOT = {"Description": "Whether the session was a pilot (a try-out of the study, not a "
                          "participant's data): 1 pilot, 0 not. Present only when pilot sessions "
-                         "were included (realpen study export --include-pilot).",
+                         "were asked for in the export.",
           "Levels": {"1": "a pilot session", "0": "a participant's session"}}
 
 
