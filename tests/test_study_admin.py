@@ -162,8 +162,8 @@ def test_a_withdrawal_leaves_no_data_of_the_participant(store_target):
     assert nxt["index"] == mine["index"] == 0
 
 
-def test_stale_sessions_are_abandoned(tmp_path):
-    target, cache = tmp_path / "s.sqlite3", study.DesignCache()
+def test_stale_sessions_are_abandoned(store_target):
+    target, cache = store_target, study.DesignCache()
     made = [admin.on_store(target, study.open_session, STUDY1,
                            study.SessionRequest(code, consent=True), cache, create=True)[0]
             for code in ("P01", "P02", "P03")]

@@ -135,7 +135,15 @@ def abandon_stale(conn: Connection, hours: float, cache: DesignCache,
     if design is not None:
         query = query.where(studies.c.name == design)
     stale = [row.id for row in conn.execute(query) if _time(row.last or row.started_at) < cutoff]
-    return [set_state(conn, session_id, "abandoned", cache) for session_id in stale]
+    ended = []
+    for session_id in stale:
+        # Looked at again under the session's lock: another server may have answered or ended
+        # it since, and such a session is skipped, not abandoned (nor a reason to stop).
+        again = conn.execute(query.where(sessions.c.id == session_id).with_for_update(
+            of=sessions)).first()
+        if again is not None and _time(again.last or again.started_at) < cutoff:
+            ended.append(set_state(conn, session_id, "abandoned", cache))
+    return ended
 
 
 def _time(text: str) -> datetime:
