@@ -287,9 +287,10 @@ PRAGMA user_version = 2;
 
 
 @contextlib.contextmanager
-def running_server(tmp_path, store_delay_s: float = 0.0, **limits):
+def running_server(tmp_path, store_delay_s: float = 0.0, prepare=None, **limits):
     """The live app under uvicorn with ``server_config(**limits)``, in a thread of this process,
-    on a free port; yields (port, app)."""
+    on a free port; yields (port, app). ``prepare(app)``, if given, runs before it serves (e.g.
+    to add a route)."""
     import asyncio
     import concurrent.futures
     import threading
@@ -318,6 +319,8 @@ def running_server(tmp_path, store_delay_s: float = 0.0, **limits):
             return outer
 
         store.append = slow_append
+    if prepare is not None:
+        prepare(app)
     sock = bind("127.0.0.1", 0)
     server = uvicorn.Server(server_config(app, **limits))
     thread = threading.Thread(target=lambda: asyncio.run(server.serve(sockets=[sock])))

@@ -4,7 +4,6 @@ refused, a paged device log, and timeouts for slow clients."""
 
 from __future__ import annotations
 
-import asyncio
 import json
 import logging
 import os
@@ -19,11 +18,10 @@ import time
 import pytest
 import sqlalchemy.exc
 from conftest import run_cli, store_rows
-from live_support import CRASHER, LEGACY_V1, LOCAL, WS, rows, talk
+from live_support import CRASHER, LEGACY_V1, LOCAL, WS, rows, running_server, talk
 
 pytest.importorskip("fastapi", reason="the live app needs the server dependencies")
 
-import uvicorn  # noqa: E402
 from fastapi.testclient import TestClient  # noqa: E402
 from websockets.sync.client import connect  # noqa: E402
 
@@ -32,7 +30,6 @@ from realpen.live.app import LiveSettings, create_app  # noqa: E402
 from realpen.live.auth import CONTENT_SECURITY_POLICY, content_security_policy  # noqa: E402
 from realpen.live.device import CommandLog, Origin  # noqa: E402
 from realpen.live.routes.device import DEVICE_LOG_PAGE  # noqa: E402
-from realpen.live.server import bind, server_config  # noqa: E402
 from realpen.live.store import StrokeStore  # noqa: E402
 from realpen.profile import resolve_profile  # noqa: E402
 
@@ -390,25 +387,12 @@ def uvicorn_server(tmp_path_factory):
 
 
 def _uvicorn_server(tmp_path):
-    app = create_app(LiveSettings.loopback(store=tmp_path / "s.sqlite3"))
-
     def boom():
         raise RuntimeError("a bug")
 
-    app.add_api_route("/boom", boom)
-    sock = bind("127.0.0.1", 0)
-    server = uvicorn.Server(server_config(app, head_timeout_s=0.5))
-    thread = threading.Thread(target=lambda: asyncio.run(server.serve(sockets=[sock])))
-    thread.start()
-    deadline = time.monotonic() + 20
-    while not server.started and time.monotonic() < deadline:
-        time.sleep(0.02)
-    try:
-        yield sock.getsockname()[1]
-    finally:
-        server.should_exit = True
-        thread.join(timeout=20)
-        sock.close()
+    with running_server(tmp_path, prepare=lambda app: app.add_api_route("/boom", boom),
+                        head_timeout_s=0.5) as (port, _app):
+        yield port
 
 
 def closed_within(connection: socket.socket, seconds: float) -> bool:
