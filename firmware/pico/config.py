@@ -41,6 +41,19 @@ STARTUP_WINDOW_MS = 1500
 # allocated since the last collection (main.py), so that collections fall between strokes.
 GC_IDLE_BYTES = 8192
 
+# The LIS3DH accelerometer (docs/recording.md): I2C0 on GP4 (SDA) / GP5 (SCL) at 400 kHz, SDO to
+# GND (address 0x18; 0x19 with SDO to 3V3), CS to 3V3 (I2C). Without one the pen still plays and
+# INFO says it has no accelerometer; CAPTURE_START then gets NACK E_NO_SENSOR.
+ACCEL = True
+ACCEL_I2C_ID = 0
+ACCEL_SDA_PIN = 4
+ACCEL_SCL_PIN = 5
+ACCEL_I2C_HZ = 400000
+ACCEL_ADDRESS = 0x18
+# Samples per I2C transfer: the I2S refill (a scheduled callback) cannot run inside a blocking
+# transfer; 5 samples (33 bytes) take about 0.75 ms at 400 kHz, well within a 2 ms DMA half.
+ACCEL_CHUNK_SAMPLES = 5
+
 BLE = True  # advertise and serve the RealPen BLE service (needs a Pico W / Pico 2 W)
 
 # Battery voltage, for EVENT battery and the BLE Battery service. On the Pico W and Pico 2 W the

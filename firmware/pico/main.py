@@ -101,6 +101,22 @@ class Battery:
         return min(100, max(0, level))
 
 
+def find_accelerometer():
+    """The LIS3DH driver when one answers on the configured bus, else None."""
+    if not config.ACCEL:
+        return None
+    try:
+        from machine import I2C
+        from rp_lis3dh import Lis3dh
+
+        bus = I2C(config.ACCEL_I2C_ID, sda=Pin(config.ACCEL_SDA_PIN),
+                  scl=Pin(config.ACCEL_SCL_PIN), freq=config.ACCEL_I2C_HZ)
+        sensor = Lis3dh(bus, config.ACCEL_ADDRESS, config.ACCEL_CHUNK_SAMPLES)
+    except (ImportError, OSError, ValueError):  # no I2C on this port, or a pin in use
+        return None
+    return sensor if sensor.present() else None
+
+
 def startup_escape():
     """True when BOOTSEL is held during the startup window: leave the REPL to mpremote."""
     start = time.ticks_ms()
@@ -137,9 +153,13 @@ def main():
             ble_module = None
     if ble_module is not None:
         features |= P.FEATURE_BLE
+    sensor = find_accelerometer()
+    if sensor is not None:
+        features |= P.FEATURE_ACCEL
     pen = Pen(name=config.NAME, sample_rate=config.SAMPLE_RATE,
               max_pattern_bytes=config.MAX_PATTERN_BYTES, gain_cap=config.GAIN_CAP,
-              features=features, battery=battery.millivolts if battery is not None else None)
+              features=features, battery=battery.millivolts if battery is not None else None,
+              sensor=sensor)
     usb = pen.add_link(sys.stdout.buffer.write, "usb")
     ble = None
     if ble_module is not None:
@@ -172,7 +192,7 @@ def main():
         if ble is not None:
             ble.poll()
         pen.underruns = audio.underruns
-        pen.tick()
+        pen.tick()  # also drains the accelerometer's FIFO when a capture runs
         if not count:
             # Collect the garbage while the pen is silent and nothing came, once enough has
             # piled up: a collection holds the refill back, and one that outlasted a DMA half

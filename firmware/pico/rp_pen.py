@@ -24,6 +24,7 @@ try:
 except ImportError:  # a checkout without the link: the host package has the same module
     from realpen.device import protocol as P
 
+from rp_capture import Capture
 from rp_player import Player
 
 try:
@@ -50,7 +51,7 @@ def time_ns():
 
 FIRMWARE_VERSION = (1, 0, 0)
 DECODE_ERRORS_EVERY_MS = 1000  # at most one decode_errors EVENT a second, and only on growth
-UNDERRUN_EVERY_MS = 250  # at most four underrun EVENTs a second
+UNDERRUN_EVERY_MS = 250  # at most four underrun EVENTs a second (and as many overrun, dropped)
 BATTERY_EVERY_MS = 60000  # battery EVENT once a minute
 
 
@@ -62,6 +63,8 @@ _UNPACK = {
     P.HELLO: P.unpack_hello,
     P.PATTERN_BEGIN: P.unpack_pattern_begin,
     P.PATTERN_COMMIT: P.unpack_pattern_commit,
+    P.CAPTURE_START: P.unpack_capture_start,
+    P.CAPTURE_STOP: P.unpack_capture_stop,
 }
 
 
@@ -90,13 +93,15 @@ class Pen:
     voltage in mV, or None. ``on_state(t_ns, sample, playing, gain, rate, fade_ms)`` and
     ``on_swap(sample, pattern_id)``: optional hooks :meth:`fill` calls when a SET_STATE takes
     effect (``t_ns``: wall clock when its frame was decoded; ``sample``: the first sample it
-    affects, counted by :meth:`fill`) and when a new pattern starts playing.
+    affects, counted by :meth:`fill`) and when a new pattern starts playing. ``sensor``: an
+    accelerometer driver (``rp_lis3dh.Lis3dh``) for CAPTURE_START, or None (NACK
+    ``E_NO_SENSOR``); :meth:`tick` sends its SAMPLES blocks to the link that started the capture.
     """
 
     def __init__(self, name="RealPen", sample_rate=8000, max_pattern_bytes=32768,
                  gain_cap=32767, features=P.FEATURE_USB | P.FEATURE_RATE,
                  protocol_version=P.PROTOCOL_VERSION, firmware=FIRMWARE_VERSION, battery=None,
-                 on_state=None, on_swap=None):
+                 on_state=None, on_swap=None, sensor=None):
         self.name = name
         self.sample_rate = sample_rate
         self.max_pattern_bytes = max_pattern_bytes
@@ -132,6 +137,11 @@ class Pen:
         self._us_last = ticks_us()
         self._clock_s = 0
         self._clock_us = 0
+        self.capture = Capture(sensor, self.clock_us, ticks_us) if sensor is not None else None
+        self._capture_link = None
+        self._overruns_sent = 0
+        self._dropped_sent = 0
+        self._capture_event_at = now
 
     # -- links ------------------------------------------------------------------------------
 
@@ -223,8 +233,78 @@ class Pen:
                 self._reply(link, P.INFO, seq, self.info_payload())
         elif ftype == P.PATTERN_BEGIN:
             self._begin(link, seq, fields)
-        else:
+        elif ftype == P.PATTERN_COMMIT:
             self._commit(link, seq, fields)
+        elif ftype == P.CAPTURE_START:
+            self._capture_start(link, seq, fields)
+        else:
+            self._capture_stop(link, seq)
+
+    def _capture_start(self, link, seq, fields):
+        capture = self.capture
+        if capture is None:
+            self._nack(link, P.CAPTURE_START, seq, P.E_NO_SENSOR)
+            return
+        if capture.active:
+            self._finish_capture()
+        code = capture.start(fields[0], fields[1])
+        if code:
+            self._nack(link, P.CAPTURE_START, seq, code)
+            return
+        self._capture_link = link
+        self._overruns_sent = 0
+        self._dropped_sent = 0
+        self._reply(link, P.ACK, seq, P.pack_ack(P.CAPTURE_START))
+
+    def _capture_stop(self, link, seq):
+        # The ACK follows the last block, so a host has every sample once it has the ACK.
+        if self.capture is not None and self.capture.active:
+            self._finish_capture()
+        self._reply(link, P.ACK, seq, P.pack_ack(P.CAPTURE_STOP))
+
+    def _finish_capture(self):
+        capture = self.capture
+        payload = capture.drain()
+        if payload is not None:
+            self._send_samples(payload)
+        capture.stop()
+        self._capture_events(True)
+        self._capture_link = None
+
+    def _send_samples(self, payload):
+        frame = P.encode_frame(P.SAMPLES, self._event_seq, payload)
+        self._event_seq = (self._event_seq + 1) & 0xFF
+        try:
+            sent = self._capture_link.send(frame)
+        except OSError:
+            sent = False
+        if sent is False:  # the link could not take it (a send function may say so)
+            self.capture.dropped += 1
+
+    def _capture_events(self, force):
+        capture = self.capture
+        now = ticks_ms()
+        if not force and ticks_diff(now, self._capture_event_at) < UNDERRUN_EVERY_MS:
+            return
+        if capture.overruns != self._overruns_sent:
+            self._overruns_sent = capture.overruns
+            self._capture_event_at = now
+            self.event(P.EV_OVERRUN, capture.overruns)
+        if capture.dropped != self._dropped_sent:
+            self._dropped_sent = capture.dropped
+            self._capture_event_at = now
+            self.event(P.EV_CAPTURE_DROPPED, capture.dropped)
+
+    def poll_capture(self):
+        """Drain the sensor's FIFO when it reached the watermark and send the block (called
+        by :meth:`tick`; a main loop may call it more often)."""
+        capture = self.capture
+        if capture is None or not capture.active:
+            return
+        payload = capture.poll()
+        if payload is not None:
+            self._send_samples(payload)
+        self._capture_events(False)
 
     def _set_state(self, link, seq, fields):
         playing, gain, rate, fade_ms = fields
@@ -332,6 +412,7 @@ class Pen:
         their count grew, at most once a second), battery (once a minute). Call often (at
         least every few minutes: it also keeps the PONG clock across ``ticks_us`` wraps)."""
         self._advance_clock()
+        self.poll_capture()
         player = self.player
         if player.swaps != self._swaps_seen:
             self._swaps_seen = player.swaps

@@ -19,6 +19,15 @@ Arguments are ``key=value`` words:
   ``name=RealPen``: the pen's settings (defaults from config.py).
 - ``nonblocking=1``: stdin is in non-blocking mode (SimPen sets it), so reads take what is there;
   otherwise bytes are read one at a time while poll says there are more.
+- ``sensor=1``: a simulated LIS3DH on a simulated 400 kHz I2C bus (``sim_lis3dh.py``), driven by
+  the firmware's own driver (``rp_lis3dh.py``, ``rp_capture.py``); INFO then says
+  accelerometer. With it: ``accel=PATH`` what the pen feels while writing, float32 x, y, z in g
+  at the sensor's true rate, looped; ``rate_error=0`` the sensor's rate error (true rate =
+  1344 × (1 + rate_error)); ``actuator=b0,b1,b2,a1,a2`` the actuator as a biquad at the pen's
+  rate, through which what the pen plays reaches the sensor, ``mount_g=1`` its acceleration in
+  g at full scale and |H| = 1; ``bus_hz=400000``; ``chunk=5`` samples per I2C transfer;
+  ``capture_every_ms=0`` how often the main loop looks at the FIFO (0: every pass; a long one
+  drains too slowly and overruns, on purpose).
 
 SIGINT (KeyboardInterrupt) ends it cleanly: the files are closed and a ``stop`` line written.
 """
@@ -33,6 +42,7 @@ from array import array
 import config
 import rp_protocol as P
 from rp_pen import Pen
+from sim_lis3dh import RealClock
 
 QUEUE_MS = 8  # the most audio rendered ahead of the virtual DAC
 FEED_PIECE = 64  # bytes handed to the pen between two looks at the sink
@@ -106,8 +116,10 @@ class Sink:
     pen's blocks while at most ``QUEUE_MS`` are queued, records what is played, and counts as
     an underrun (silence played, the player standing still) every time the queue ran dry."""
 
-    def __init__(self, pen, rate, block, record, trace):
+    def __init__(self, pen, rate, block, record, trace, clock, actuator=None):
         self.pen = pen
+        self.clock = clock
+        self.actuator = actuator
         self.rate = rate
         self.block = block
         self.ahead = max(rate * QUEUE_MS // 1000, block)
@@ -116,16 +128,17 @@ class Sink:
         self.buf = array("h", bytes(2 * block))
         self.silence = array("h", bytes(2 * block))
         self.start = pen.samples  # the DAC's sample count at elapsed 0
-        self.elapsed_us = 0
-        self.last = time.ticks_us()
+        self.t0 = clock.now()
+
+    def dac_position(self, t_us):
+        """The DAC's position (samples, fractional) at clock time ``t_us``."""
+        return self.start + (t_us - self.t0) * self.rate / 1000000
 
     def pump(self):
         """Render what is due; returns ms until the next block is due (for poll)."""
         pen = self.pen
-        now = time.ticks_us()
-        self.elapsed_us += time.ticks_diff(now, self.last)
-        self.last = now
-        due = self.start + self.elapsed_us * self.rate // 1000000  # played by now
+        elapsed_us = self.clock.now() - self.t0
+        due = self.start + elapsed_us * self.rate // 1000000  # played by now
         if due > pen.samples:
             missing = due - pen.samples
             self.trace.write({"event": "underrun", "t_ns": time.time_ns(),
@@ -139,11 +152,38 @@ class Sink:
             pen.samples += missing
             pen.underrun()
         while pen.samples + self.block <= due + self.ahead:
+            first = pen.samples
             pen.fill(self.buf)
             if self.record is not None:
                 self.record.write(self.buf)
+            if self.actuator is not None:
+                self.actuator.play(first, self.buf)
         room = pen.samples - (due + self.ahead - self.block)
         return (room * 1000 + self.rate - 1) // self.rate if room > 0 else 0
+
+
+def make_sensor(options, clock):
+    """The simulated LIS3DH on its bus, its driver and the actuator from ``options``."""
+    from array import array
+
+    from rp_lis3dh import Lis3dh
+    from sim_lis3dh import SimActuator, SimI2C, SimLis3dh
+
+    source = None
+    path = options.get("accel")
+    if path:
+        size = os.stat(path)[6]
+        source = array("f", bytes(size - size % 12))
+        with open(path, "rb") as file:
+            file.readinto(source)
+    actuator = None
+    if options.get("actuator"):
+        coefficients = [float(word) for word in options["actuator"].split(",")]
+        actuator = SimActuator(coefficients, float(options.get("mount_g", "1")))
+    model = SimLis3dh(clock, float(options.get("rate_error", "0")), source, actuator)
+    bus = SimI2C(model, clock, int(options.get("bus_hz", "400000")))
+    driver = Lis3dh(bus, chunk=int(options.get("chunk", "5")))
+    return driver, actuator, model
 
 
 def run(options):
@@ -166,9 +206,16 @@ def run(options):
         trace.write({"event": "swap", "t_ns": time.time_ns(), "sample": sample,
                      "id": pattern_id})
 
+    clock = RealClock()
+    sensor = None
+    actuator = None
+    features = P.FEATURE_USB | P.FEATURE_RATE
+    if options.get("sensor", "0") == "1":
+        sensor, actuator, model = make_sensor(options, clock)
+        features |= P.FEATURE_ACCEL
     pen = Pen(name=name, sample_rate=rate, max_pattern_bytes=max_bytes, gain_cap=gain_cap,
-              features=P.FEATURE_USB | P.FEATURE_RATE, protocol_version=protocol,
-              on_state=on_state, on_swap=on_swap)
+              features=features, protocol_version=protocol,
+              on_state=on_state, on_swap=on_swap, sensor=sensor)
     pen.samples = first
     stdin = sys.stdin.buffer
     link = pen.add_link(make_sender(sys.stdout.buffer, not nonblocking), "pty")
@@ -180,7 +227,13 @@ def run(options):
     trace.write({"event": "boot", "t_ns": time.time_ns(), "sample": first, "rate": rate,
                  "block": config.BLOCK_SAMPLES})
     pen.boot()
-    sink = Sink(pen, rate, config.BLOCK_SAMPLES, record, trace)
+    sink = Sink(pen, rate, config.BLOCK_SAMPLES, record, trace, clock, actuator)
+    capture_every_us = int(options.get("capture_every_ms", "0")) * 1000
+    capture_at = clock.now()
+    if sensor is not None:
+        model.dac_position = sink.dac_position
+        sensor.between = sink.pump  # the I2S refill runs between two transfers on the Pico
+        trace.write({"event": "sensor", "t_ns": time.time_ns(), "rate": model.rate_error})
     try:
         while True:
             wait_ms = sink.pump()
@@ -202,6 +255,14 @@ def run(options):
                 for at in range(0, count, FEED_PIECE):
                     link.feed(memoryview(inbuf)[at:min(at + FEED_PIECE, count)])
                     sink.pump()
+            if capture_every_us and pen.capture is not None and pen.capture.active:
+                # A drain held back on purpose: only every capture_every_ms.
+                now = clock.now()
+                if now - capture_at >= capture_every_us:
+                    capture_at = now
+                    pen.capture._wait_us = 0
+                else:
+                    pen.capture._wait_us = 1 << 29
             pen.tick()
     except (KeyboardInterrupt, EOFError):
         pass

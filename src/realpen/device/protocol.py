@@ -34,11 +34,15 @@ PONG = 0x31
 ACK = 0x40
 NACK = 0x41
 EVENT = 0x50
+CAPTURE_START = 0x60
+CAPTURE_STOP = 0x61
+SAMPLES = 0x62
 
 TYPE_NAMES = {
     HELLO: "HELLO", INFO: "INFO", PATTERN_BEGIN: "PATTERN_BEGIN", PATTERN_CHUNK: "PATTERN_CHUNK",
     PATTERN_COMMIT: "PATTERN_COMMIT", SET_STATE: "SET_STATE", PING: "PING", PONG: "PONG",
-    ACK: "ACK", NACK: "NACK", EVENT: "EVENT",
+    ACK: "ACK", NACK: "NACK", EVENT: "EVENT", CAPTURE_START: "CAPTURE_START",
+    CAPTURE_STOP: "CAPTURE_STOP", SAMPLES: "SAMPLES",
 }
 
 # NACK codes.
@@ -53,6 +57,8 @@ E_INCOMPLETE = 8
 E_NO_UPLOAD = 9
 E_BAD_RATE = 10
 E_BAD_STATE = 11
+E_NO_SENSOR = 12
+E_BAD_CAPTURE = 13
 
 NACK_TEXT = {
     E_UNKNOWN_TYPE: "unknown frame type",
@@ -66,6 +72,8 @@ NACK_TEXT = {
     E_NO_UPLOAD: "no pattern upload under way",
     E_BAD_RATE: "sample rate not supported",
     E_BAD_STATE: "state value out of range",
+    E_NO_SENSOR: "the pen has no accelerometer",
+    E_BAD_CAPTURE: "capture range or rate not supported",
 }
 
 # EVENT kinds and what their value means.
@@ -74,9 +82,12 @@ EV_UNDERRUN = 2  # value: underruns so far
 EV_BATTERY = 3  # value: battery voltage in mV
 EV_PATTERN = 4  # value: id of the pattern now playing
 EV_DECODE_ERRORS = 5  # value: frames dropped so far (bad COBS, CRC, length)
+EV_OVERRUN = 6  # value: sensor FIFO overruns in this capture so far (samples were lost)
+EV_CAPTURE_DROPPED = 7  # value: SAMPLES blocks of this capture the pen could not send so far
 
 EVENT_NAMES = {EV_BOOT: "boot", EV_UNDERRUN: "underrun", EV_BATTERY: "battery",
-               EV_PATTERN: "pattern", EV_DECODE_ERRORS: "decode_errors"}
+               EV_PATTERN: "pattern", EV_DECODE_ERRORS: "decode_errors",
+               EV_OVERRUN: "overrun", EV_CAPTURE_DROPPED: "capture_dropped"}
 
 FORMAT_S16LE = 1  # pattern samples: signed 16-bit little-endian
 
@@ -84,6 +95,16 @@ FEATURE_USB = 1
 FEATURE_BLE = 2
 FEATURE_BATTERY = 4
 FEATURE_RATE = 8
+FEATURE_ACCEL = 16  # an accelerometer (LIS3DH) the host can capture from
+
+# Capture: full-scale ranges in g and output rates in Hz the LIS3DH offers (normal and
+# high-resolution modes); 1344 Hz is the method's rate. SAMPLES blocks hold at most a FIFO's worth.
+CAPTURE_RANGES = (2, 4, 8, 16)
+CAPTURE_RATES = (1, 10, 25, 50, 100, 200, 400, 1344)
+CAPTURE_RATE = 1344
+MAX_BLOCK_SAMPLES = 32  # the LIS3DH FIFO depth
+SAMPLE_BYTES = 6  # x, y, z as int16 little-endian, left-justified as the sensor gives them
+SAMPLES_OVERRUN = 1  # SAMPLES flags bit: the sensor's FIFO overran before this block
 
 GAIN_ONE = 65535  # SET_STATE gain: 65535 is the firmware's capped full drive
 RATE_ONE = 4096  # SET_STATE rate: Q12 playback-rate factor, 4096 plays the pattern as stored
@@ -106,6 +127,8 @@ _PONG = "<II"
 _ACK = "<B"
 _NACK = "<BB"
 _EVENT = "<BI"
+_CAPTURE_START = "<BH"
+_SAMPLES = "<IIBB"
 
 
 def _crc16_table():
@@ -377,3 +400,44 @@ def pack_event(kind, value):
 
 def unpack_event(payload):
     return _unpack(_EVENT, payload)
+
+
+def pack_capture_start(range_g, rate_hz):
+    """CAPTURE_START: full-scale range in g (:data:`CAPTURE_RANGES`) and output rate in Hz
+    (:data:`CAPTURE_RATES`)."""
+    return struct.pack(_CAPTURE_START, range_g, rate_hz)
+
+
+def unpack_capture_start(payload):
+    return _unpack(_CAPTURE_START, payload)
+
+
+def pack_capture_stop():
+    """CAPTURE_STOP: no payload; the ACK follows the capture's last SAMPLES block."""
+    return b""
+
+
+def unpack_capture_stop(payload):
+    if len(payload):
+        raise ValueError(f"CAPTURE_STOP payload of {len(payload)} bytes, expected 0")
+    return None
+
+
+def pack_samples(first, t_us, range_g, flags, data):
+    """SAMPLES: index of the block's first sample since CAPTURE_START (lost samples counted),
+    the pen's clock in µs when the sensor's FIFO level was read (the block's last sample had
+    been taken by then; wraps at 2**32), the range in g, flags (:data:`SAMPLES_OVERRUN`), then
+    1 … :data:`MAX_BLOCK_SAMPLES` samples of x, y, z as the sensor gives them (int16 LE,
+    left-justified)."""
+    count = len(data)
+    if count == 0 or count % SAMPLE_BYTES or count > MAX_BLOCK_SAMPLES * SAMPLE_BYTES:
+        raise ValueError(f"SAMPLES data of {count} bytes")
+    return struct.pack(_SAMPLES, first & 0xFFFFFFFF, t_us & 0xFFFFFFFF, range_g, flags) + bytes(data)
+
+
+def unpack_samples(payload):
+    size = struct.calcsize(_SAMPLES)
+    count = len(payload) - size
+    if count <= 0 or count % SAMPLE_BYTES or count > MAX_BLOCK_SAMPLES * SAMPLE_BYTES:
+        raise ValueError(f"SAMPLES payload of {len(payload)} bytes")
+    return struct.unpack(_SAMPLES, payload[:size]) + (bytes(payload[size:]),)

@@ -91,6 +91,19 @@ class SimPen:
         protocol_version: the protocol version the pen claims (None: the current one); another
             one makes it refuse HELLO, as an old pen would.
         micropython: the MicroPython executable (None: found by :func:`find_micropython`).
+        sensor: give the pen a simulated LIS3DH accelerometer (INFO says so; the firmware's
+            own driver reads it over a simulated 400 kHz I2C bus).
+        accelerometer: a 1–3 axis recording the sensor feels, looped, as while writing
+            (None: only sensor noise and the actuator).
+        actuator: the pen's physical actuator (a model spec, e.g. ``"lra:f0=175,q=8"``),
+            through which what the pen plays reaches the sensor; hidden from any host.
+        mount_g: the actuator's acceleration at the sensor at full scale and resonance, in g.
+        noise_g: sensor noise, RMS per axis, in g.
+        rate_error: the sensor's true rate is 1344 Hz × (1 + rate_error)
+            (:attr:`sensor_rate_hz`).
+        capture_every_ms: look at the sensor's FIFO only this often (0: every main-loop pass);
+            a long interval makes the FIFO overrun, on purpose.
+        seed: the sensor noise's seed.
 
     Relative paths are taken from the working folder at construction (the firmware itself runs
     in ``firmware/pico``). Use as a context manager, or call :meth:`start` and :meth:`stop`;
@@ -99,7 +112,10 @@ class SimPen:
 
     def __init__(self, *, record: Path | None = None, trace: Path | None = None,
                  link: Path | None = None, rate: int = 8000, max_pattern_bytes: int = 32768,
-                 protocol_version: int | None = None, micropython: str | None = None):
+                 protocol_version: int | None = None, micropython: str | None = None,
+                 sensor: bool = True, accelerometer: Path | None = None,
+                 actuator: str = "lra:f0=175,q=8", mount_g: float = 1.0, noise_g: float = 0.005,
+                 rate_error: float = 0.013, capture_every_ms: int = 0, seed: int = 0):
         if isinstance(rate, bool) or not isinstance(rate, int) or not 1000 <= rate <= 192000:
             raise RealPenError(f"simulated pen: sample rate must be an integer 1000 … 192000 Hz, "
                                f"got {rate!r}")
@@ -116,6 +132,17 @@ class SimPen:
         self.max_pattern_bytes = max_pattern_bytes
         self.protocol_version = protocol_version
         self._micropython = micropython
+        self.sensor = bool(sensor or accelerometer is not None)
+        self.accelerometer = None if accelerometer is None else Path(os.path.abspath(accelerometer))
+        self.actuator = actuator
+        self.mount_g = float(mount_g)
+        self.noise_g = float(noise_g)
+        self.rate_error = float(rate_error)
+        self.capture_every_ms = int(capture_every_ms)
+        self.seed = int(seed)
+        if not -0.1 < self.rate_error < 0.1:
+            raise RealPenError(f"simulated pen: the sensor's rate error must be within ±10 %, "
+                               f"got {rate_error!r}")
         self._process: subprocess.Popen | None = None
         self._slave: int | None = None
         self._slave_path: str | None = None
@@ -142,6 +169,11 @@ class SimPen:
         if self._slave_path is None:
             raise RealPenError("simulated pen: not started")
         return str(self.link) if self.link is not None else self._slave_path
+
+    @property
+    def sensor_rate_hz(self) -> float:
+        """The simulated sensor's true output rate in Hz (what a host must estimate)."""
+        return 1344 * (1 + self.rate_error)
 
     @property
     def pty(self) -> str | None:
@@ -200,6 +232,13 @@ class SimPen:
                 self._cleanup_workdir()
                 raise RealPenError(f"{path}: cannot write ({error.strerror or error})") from None
         self._stderr_path = self._workdir / "stderr.txt"
+        self._sensor_args = []
+        if self.sensor:
+            try:
+                self._sensor_args = self._prepare_sensor()
+            except BaseException:
+                self._cleanup_workdir()
+                raise
         self._executable = executable
         self._firmware = firmware
         try:
@@ -267,6 +306,20 @@ class SimPen:
 
     # -- internals --------------------------------------------------------------------------
 
+    def _prepare_sensor(self) -> list[str]:
+        from realpen.device.sim_parts import actuator_biquad, write_sensor_source
+
+        assert self._workdir is not None
+        source = self._workdir / "accel.f32"
+        write_sensor_source(source, self.accelerometer, self.sensor_rate_hz,
+                            noise_g=self.noise_g, seed=self.seed)
+        args = ["sensor=1", f"accel={source}", f"rate_error={self.rate_error!r}",
+                f"mount_g={self.mount_g!r}", f"capture_every_ms={self.capture_every_ms}"]
+        if self.actuator:
+            coefficients = actuator_biquad(self.actuator, self.rate)
+            args.append("actuator=" + ",".join(repr(float(c)) for c in coefficients))
+        return args
+
     @property
     def _raw_path(self) -> Path:
         assert self._workdir is not None
@@ -288,6 +341,7 @@ class SimPen:
                     f"max_pattern_bytes={self.max_pattern_bytes}", "nonblocking=1"]
             if self.protocol_version is not None:
                 args.append(f"protocol={int(self.protocol_version)}")
+            args += self._sensor_args
             self._trace_seen = self._trace_path.stat().st_size
             with open(self._stderr_path, "ab") as stderr:
                 self._process = subprocess.Popen(
