@@ -318,17 +318,45 @@ def sim(
                                       help="Write the firmware's trace, JSON lines (SET_STATE "
                                            "receipts with the sample they affect, swaps, "
                                            "underruns)."),
+    accelerometer: Path | None = typer.Option(
+        None, "--accelerometer", metavar="SOURCE",
+        help="A 1-3 axis recording (WAV, CSV, NPZ) the pen's simulated LIS3DH feels, looped, "
+             "as while writing. Without it the sensor feels only its noise and the actuator."),
+    actuator: str = typer.Option(
+        "lra:f0=175,q=8", "--actuator", metavar="SPEC",
+        help="The simulated pen's physical actuator (lra:f0=…,q=…, piezo:…, flat): what the "
+             "firmware plays reaches the sensor through it. Hidden from hosts: "
+             "'realpen actuator measure' finds it."),
+    mount_g: float = typer.Option(1.0, "--mount-g", min=0.0, max=16.0,
+                                  help="The actuator's acceleration at the sensor at full scale "
+                                       "and resonance, in g."),
+    noise_mg: float = typer.Option(5.0, "--noise-mg", min=0.0, max=1000.0,
+                                   help="Sensor noise, RMS per axis, in mg."),
+    rate_error: float = typer.Option(1.3, "--rate-error", min=-9.0, max=9.0,
+                                     help="The sensor's true rate is 1344 Hz × (1 + this/100): "
+                                          "a real LIS3DH is off by up to a few per cent."),
+    no_accelerometer: bool = typer.Option(False, "--no-accelerometer",
+                                          help="A pen without a sensor (CAPTURE_START is "
+                                               "refused)."),
     force: bool = force_option(),
 ) -> None:
     """Run the pen's real firmware on a pseudo-terminal, until Ctrl-C.
 
-    The firmware runs under the MicroPython Unix port. The first line
-    printed is 'port: /dev/pts/N': the other device commands take it as
-    --port, and 'realpen serve --device serial:/dev/pts/N' drives it from
-    the live page. Ctrl-C or SIGTERM stops it and writes --record.
+    The firmware runs under the MicroPython Unix port, with a simulated
+    LIS3DH accelerometer on a simulated I2C bus (register by register, as
+    the real part) and a simulated actuator between what the pen plays and
+    what the sensor feels. The first line printed is 'port: /dev/pts/N':
+    the other device commands take it as --port ('realpen record', 'realpen
+    actuator measure'), and 'realpen serve --device serial:/dev/pts/N'
+    drives it from the live page. Ctrl-C or SIGTERM stops it and writes
+    --record.
     """
     if record is not None and record.suffix.lower() != ".wav":
         raise fail(record, "--record writes a WAV file; give a name ending in .wav")
+    if accelerometer is not None and no_accelerometer:
+        raise RealPenError("--accelerometer and --no-accelerometer: give one of them")
+    if accelerometer is not None and not accelerometer.is_file():
+        raise fail(accelerometer, "no such file (--accelerometer)")
     check_outputs(record, trace, force=force)
     # --record is written when the pen stops: a place that takes no file must be refused now,
     # not after the session it would have recorded.
@@ -336,8 +364,12 @@ def sim(
         if path is not None:
             _check_writable_folder(flag, path)
     from realpen.device.sim import SimPen
+    from realpen.device.sim_parts import actuator_biquad
 
-    pen = SimPen(record=record, trace=trace)
+    actuator_biquad(actuator, 8000)  # a spec the simulator cannot use is refused now
+    pen = SimPen(record=record, trace=trace, sensor=not no_accelerometer,
+                 accelerometer=accelerometer, actuator=actuator, mount_g=mount_g,
+                 noise_g=noise_mg / 1000, rate_error=rate_error / 100)
     port = None
     interrupted = False
     # The first Ctrl-C (or SIGTERM) stops the pen; one more while the recording is written
@@ -351,6 +383,10 @@ def sim(
             pen.start()
             port = pen.port
             print(f"port: {port}", flush=True)  # the line a script reads: first, whole
+            if pen.sensor:
+                felt = accelerometer if accelerometer is not None else "its noise only"
+                print(f"  accelerometer: LIS3DH at {pen.sensor_rate_hz:.1f} Hz true rate "
+                      f"(1344 nominal), feeling {felt}; actuator {actuator}", flush=True)
             print(f"  the pen's firmware runs there ('realpen device --port {port} info'; "
                   f"the live app: 'realpen serve --device serial:{port}'); Ctrl-C stops it"
                   f"{f' and writes {record}' if record else ''}", flush=True)
