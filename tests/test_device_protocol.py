@@ -15,6 +15,7 @@ import pytest
 from realpen.device import protocol as p
 
 VECTORS = json.loads((Path(__file__).parent / "data" / "protocol_vectors.json").read_text())
+BYTES_LAST = ("pack_pattern_chunk", "pack_samples")  # their last argument is bytes, hex in JSON
 DEVICE_SRC = Path(p.__file__).parent
 
 
@@ -60,15 +61,15 @@ def test_cobs_refuses_malformed_input(encoded):
 @pytest.mark.parametrize("frame", VECTORS["frames"], ids=lambda frame: frame["name"])
 def test_every_message_packs_frames_and_unpacks_as_the_vectors_say(frame):
     args = list(frame["args"])
-    if frame["pack"] == "pack_pattern_chunk":
-        args[1] = bytes.fromhex(args[1])
+    if frame["pack"] in BYTES_LAST:
+        args[-1] = bytes.fromhex(args[-1])
     payload = getattr(p, frame["pack"])(*args)
     assert payload.hex() == frame["payload_hex"]
     assert p.encode_frame(frame["type"], frame["seq"], payload).hex() == frame["frame_hex"]
     decoded = p.FrameDecoder().feed(bytes.fromhex(frame["frame_hex"]))
     assert decoded == [(frame["type"], frame["seq"], payload)]
     unpacked = getattr(p, "un" + frame["pack"])(payload)
-    expected = tuple(args) if len(args) > 1 else args[0]
+    expected = tuple(args) if len(args) > 1 else (args[0] if args else None)
     assert unpacked == expected
     with pytest.raises(ValueError):
         getattr(p, "un" + frame["pack"])(payload + b"\x00" * 40)
@@ -120,6 +121,26 @@ def test_the_decoder_survives_1e5_random_and_corrupted_frames_and_resynchronises
     assert len(decoder.buffer) <= decoder.max_encoded
 
 
+def test_capture_messages_refuse_what_the_pen_never_sends():
+    """SAMPLES hold 1 … 32 whole samples; CAPTURE_STOP has no payload; a full block, the largest
+    frame a pen sends while capturing, is 208 bytes on the wire (one BLE write at MTU 247)."""
+    sample = bytes(p.SAMPLE_BYTES)
+    for count in (0, p.MAX_BLOCK_SAMPLES + 1):
+        with pytest.raises(ValueError, match="SAMPLES"):
+            p.pack_samples(0, 0, 2, 0, sample * count)
+    with pytest.raises(ValueError, match="SAMPLES"):
+        p.pack_samples(0, 0, 2, 0, sample + b"\x01")
+    for payload in (bytes(10), bytes(10 + 5), bytes(10 + 6 * 33)):
+        with pytest.raises(ValueError, match="SAMPLES"):
+            p.unpack_samples(payload)
+    with pytest.raises(ValueError, match="CAPTURE_STOP"):
+        p.unpack_capture_stop(b"\x00")
+    full = p.pack_samples(2**32 + 5, 2**32 + 7, 16, p.SAMPLES_OVERRUN,
+                          sample * p.MAX_BLOCK_SAMPLES)
+    assert p.unpack_samples(full)[:4] == (5, 7, 16, p.SAMPLES_OVERRUN)  # counters wrap at 2**32
+    assert len(p.encode_frame(p.SAMPLES, 0, full)) == 208
+
+
 def test_frames_larger_than_the_limit_are_refused_on_both_ends():
     with pytest.raises(ValueError, match="larger"):
         p.encode_frame(p.PATTERN_CHUNK, 0, bytes(p.MAX_FRAME))
@@ -146,8 +167,8 @@ for c in v["cobs"]:
     assert p.cobs_encode(binascii.unhexlify(c["raw"])) == binascii.unhexlify(c["encoded"]); ok += 1
 for f in v["frames"]:
     args = list(f["args"])
-    if f["pack"] == "pack_pattern_chunk":
-        args[1] = binascii.unhexlify(args[1])
+    if f["pack"] in {BYTES_LAST!r}:
+        args[-1] = binascii.unhexlify(args[-1])
     payload = getattr(p, f["pack"])(*args)
     assert p.encode_frame(f["type"], f["seq"], payload) == binascii.unhexlify(f["frame_hex"])
     assert p.FrameDecoder().feed(binascii.unhexlify(f["frame_hex"]))[0][2] == payload

@@ -57,13 +57,15 @@ sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not 
 
 class Server:
     """The live app in this process, uvicorn on a thread. It starts in the background (most of
-    it is importing the app) while the browser launches; ``base`` waits for it."""
+    it is importing the app) while the browser launches; ``base`` waits for it. ``device``: the
+    server's own pen (:func:`realpen.live.device.open_device`), closed when the app stops."""
 
-    def __init__(self, folder: Path):
+    def __init__(self, folder: Path, device=None):
         import socket
         import threading
 
         self.folder = folder
+        self.device = device
         self.socket = socket.socket()
         self.socket.bind(("127.0.0.1", 0))
         self.server = None
@@ -77,7 +79,8 @@ class Server:
 
             from realpen.live.app import LiveSettings, create_app
 
-            app = create_app(LiveSettings.loopback(store=self.folder / "strokes.sqlite3"))
+            app = create_app(LiveSettings.loopback(store=self.folder / "strokes.sqlite3",
+                                                   device=self.device))
             self.server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
             self.server.run(sockets=[self.socket])
         except BaseException as error:  # reported by ``base``
@@ -133,7 +136,7 @@ def open_page(browser, server, init_script: str | None = None):
 
 # ---- the codec ------------------------------------------------------------------------------
 
-CHECK_VECTORS = """async ([vectors, randoms, crc32s]) => {
+CHECK_VECTORS = """async ([vectors, randoms, crc32s, captureTables]) => {
   const P = await import('/static/pen-protocol.js');
   const fails = [];
   const hex = P.toHex;
@@ -156,26 +159,32 @@ CHECK_VECTORS = """async ([vectors, randoms, crc32s]) => {
   const whole = [];
   for (const f of vectors.frames) {
     const [pack, unpack] = P.MESSAGES[f.pack];
-    const bytesArg = f.pack === 'pack_pattern_chunk';
-    const args = bytesArg ? [f.args[0], P.fromHex(f.args[1])] : f.args;
+    // The last argument of these is bytes, written as hex in the vectors.
+    const bytesArg = ['pack_pattern_chunk', 'pack_samples'].includes(f.pack);
+    const args = bytesArg ? [...f.args.slice(0, -1), P.fromHex(f.args.at(-1))] : f.args;
     const payload = pack(...args);
     same(`${f.name} payload`, hex(payload), f.payload_hex);
     const frame = P.encodeFrame(f.type, f.seq, payload);
     same(`${f.name} frame`, hex(frame), f.frame_hex);
     whole.push(frame);
     let got = unpack(P.fromHex(f.payload_hex));
-    if (bytesArg) got = [got[0], hex(got[1])];
-    same(`${f.name} unpack`, Array.isArray(got) ? got : [got], f.args);
+    if (bytesArg) got = [...got.slice(0, -1), hex(got.at(-1))];
+    // protocol.py's None (CAPTURE_STOP) is null here: a message of no fields.
+    same(`${f.name} unpack`, Array.isArray(got) ? got : got === null ? [] : [got], f.args);
     const decoder = new P.FrameDecoder();
     const frames = [];
     for (const byte of P.fromHex(f.frame_hex)) frames.push(...decoder.feed([byte]));
     same(`${f.name} decoded byte by byte`, frames.map(([t, s, p]) => [t, s, hex(p)]),
       [[f.type, f.seq, f.payload_hex]]);
-    throws(`${f.name} unpack of nothing`, () => unpack(new Uint8Array(0)));
+    if (payload.length) throws(`${f.name} unpack of nothing`, () => unpack(new Uint8Array(0)));
     throws(`${f.name} unpack of 40 bytes more`, () => unpack(new Uint8Array(payload.length + 40)));
   }
   throws('a name longer than 32 bytes', () => P.packInfo(1, 1, 0, 0, 8000, 1, 0, 'x'.repeat(33)));
   throws('a chunk longer than MAX_CHUNK', () => P.packPatternChunk(0, new Uint8Array(P.MAX_CHUNK + 1)));
+  throws('SAMPLES of no sample', () => P.packSamples(0, 0, 2, 0, new Uint8Array(0)));
+  throws('SAMPLES of 33', () => P.packSamples(0, 0, 2, 0, new Uint8Array(6 * 33)));
+  throws('SAMPLES of a part sample', () => P.unpackSamples(new Uint8Array(10 + 7)));
+  same('capture ranges and rates', [P.CAPTURE_RANGES, P.CAPTURE_RATES], captureTables);
   for (const s of vectors.streams) {
     same(`stream "${s.why}"`, new P.FrameDecoder().feed(P.fromHex(s.stream_hex)).length, s.frames);
   }
@@ -199,8 +208,9 @@ CHECK_VECTORS = """async ([vectors, randoms, crc32s]) => {
 
 
 def test_codec_passes_the_vectors_in_the_browser(browser, server):
-    """pen-protocol.js: every vector (CRC-16, COBS, frames, pack/unpack, streams), random
-    frames encoded as protocol.py encodes them, and CRC-32 as zlib computes it."""
+    """pen-protocol.js: every vector (CRC-16, COBS, frames, pack/unpack, streams, the capture
+    messages among them), random frames encoded as protocol.py encodes them, CRC-32 as zlib
+    computes it, and the capture ranges and rates as protocol.py lists them."""
     rng = random.Random(12)
     randoms = [(rng.randrange(256), rng.randrange(256),
                 rng.randbytes(rng.choice([0, 1, 2, 250, 251, 252, rng.randrange(253)])).hex())
@@ -210,7 +220,8 @@ def test_codec_passes_the_vectors_in_the_browser(browser, server):
     page = context.new_page()
     try:
         page.goto(f"{server.base}static/pen-protocol.js")  # any page of the origin will do
-        result = page.evaluate(CHECK_VECTORS, [VECTORS, randoms, crc32s])
+        captures = [list(P.CAPTURE_RANGES), list(P.CAPTURE_RATES)]
+        result = page.evaluate(CHECK_VECTORS, [VECTORS, randoms, crc32s, captures])
     finally:
         context.close()
     assert result["fails"] == []
@@ -449,6 +460,7 @@ def test_web_serial_drives_the_firmware(browser, server, tmp_path):
             assert status["message"].startswith("RealPen on USB 2e8a:0005 (firmware ")
             assert status["message"].endswith(f": {pen} pattern loaded (1.50 s).")
             assert page.is_hidden("#pen-usb") and page.is_visible("#pen-disconnect")
+            assert page.text_content("#pen-panel-title") == "Pen: RealPen (this page, USB)"
             ARTIFACTS.mkdir(exist_ok=True)
             page.screenshot(path=str(ARTIFACTS / "pen-panel-usb.png"))
             pen_stroke(page)
@@ -777,6 +789,9 @@ def test_web_bluetooth_under_chromium_emulation(browser, server):
         page.wait_for_function("() => document.getElementById('pen-meta').textContent"
                                " === 'battery 87 %'")
         assert status["info"]["name"] == "RealPen" and status["info"]["sampleRate"] == 8000
+        # Both sides' pens in the headline (the server's status here carries no INFO).
+        assert page.text_content("#pen-panel-title") == (
+            "Pen: RealPen (this page, Bluetooth) and a pen (server, simulated)")
         pen.pump(lambda: pen.swaps)
         assert pen.swaps == [zlib.crc32(expected) & 0xFFFF]
         page.screenshot(path=str(ARTIFACTS / "pen-panel-ble.png"))
@@ -828,3 +843,65 @@ def test_web_bluetooth_under_chromium_emulation(browser, server):
         if pen is not None:
             pen.close()
         context.close()
+
+
+# ---- what the page says about the pen -------------------------------------------------------
+
+SHOTS = Path("/tmp/shots21")
+NOTHING_PLAYS = "Tactile: no pen connected and Tactile\u00a0\u2192\u00a0R is off \u2014 " \
+                "nothing plays the vibration"
+
+
+def test_tactile_with_nothing_to_play_it_on_says_so(browser, server):
+    """Tactile chosen, no pen on either side (the server only logs), Tactile → R off: words
+    where the gain meter was, and the headline says no pen is connected. Tactile → R on, or
+    another modality: the meter is back."""
+    context, page, problems = open_page(browser, server)
+    try:
+        assert page.text_content("#pen-panel-title") == "Pen: none connected"
+        page.click('#modalities [data-value="tactile"]')
+        page.wait_for_selector("#st-tactile", state="visible")
+        assert page.text_content("#st-tactile") == NOTHING_PLAYS
+        assert page.is_hidden("#st-gain")
+        SHOTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(SHOTS / "h3_tactile_no_pen.png"))
+        page.click("#tactile-audio")
+        page.wait_for_selector("#st-gain", state="visible")
+        assert page.is_hidden("#st-tactile")
+        page.click("#tactile-audio")
+        page.wait_for_selector("#st-tactile", state="visible")
+        page.click('#modalities [data-value="audio-tactile"]')
+        page.wait_for_selector("#st-tactile", state="hidden")
+        assert page.is_visible("#st-gain") and problems == []
+    finally:
+        context.close()
+
+
+@pytest.mark.firmware
+def test_the_pen_panel_names_the_servers_simulated_pen(browser, tmp_path, monkeypatch):
+    """A server that drives the simulated pen (the serve command's ``--device sim``): the
+    panel's headline names it by its INFO name and says it is the server's; Tactile then has
+    a pen to play on, so the meter stays."""
+    from realpen.live.device import open_device
+
+    monkeypatch.setenv("REALPEN_HOME", str(tmp_path / "home"))
+    device = open_device("sim")
+    served = Server(tmp_path, device=device)
+    try:
+        context, page, problems = open_page(browser, served)
+        try:
+            page.click('#modalities [data-value="tactile"]')
+            page.click("#pen-device")
+            page.wait_for_function("() => document.getElementById('pen-panel-title')"
+                                   ".textContent === 'Pen: RealPen (server, simulated)'",
+                                   timeout=30_000)
+            assert page.is_hidden("#st-tactile") and page.is_visible("#st-gain")
+            SHOTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(SHOTS / "h3_pen_headline.png"))
+            assert problems == []
+        finally:
+            context.close()
+    finally:
+        served.stop()
+        device.close()  # the app's shutdown closed it already, unless the app never started
+    assert not device.sim.alive

@@ -155,9 +155,9 @@ def test_shared_vectors(harness):
         args = list(case["args"])
         if case["pack"] == "pack_info":
             args[-1] = args[-1].encode().hex()
-        if case["pack"] == "pack_pattern_chunk":
+        if case["pack"] in ("pack_pattern_chunk", "pack_samples"):
             args[-1] = args[-1] or "-"
-        assert harness("pack", case["pack"], *args) == case["payload_hex"], case["name"]
+        assert unhx(harness("pack", case["pack"], *args)).hex() == case["payload_hex"], case["name"]
         frame = harness("frame", case["type"], case["seq"], case["payload_hex"] or "-")
         assert frame == case["frame_hex"], case["name"]
         count, errors, *frames = harness("decode", case["frame_hex"]).split(" ")
@@ -175,14 +175,25 @@ def test_structs_round_trip_and_refuse_wrong_lengths(harness):
         == "1 65535 16384 7"
     assert harness("unpack", "pong", P.pack_pong(7, 2**32 - 1).hex()) == f"7 {2**32 - 1}"
     assert harness("unpack", "event", P.pack_event(5, 99).hex()) == "5 99"
+    assert harness("unpack", "capture_start", P.pack_capture_start(16, 1344).hex()) == "16 1344"
+    assert harness("unpack", "capture_stop", "-") == "-"
+    block = bytes(range(P.SAMPLE_BYTES * P.MAX_BLOCK_SAMPLES))
+    samples = P.pack_samples(2**32 - 1, 77, 8, P.SAMPLES_OVERRUN, block)
+    assert harness("unpack", "samples", samples.hex()) == f"{2**32 - 1} 77 8 1 {block.hex()}"
     info = P.pack_info(1, 0, 1, 0, 8000, 24576, 9, "Due pen é")
     assert harness("unpack", "info", info.hex()) == f"1 0 1 0 8000 24576 9 {'Due pen é'.encode().hex()}"
     chunk = P.pack_pattern_chunk(360, bytes(range(180)))
     assert harness("unpack", "chunk", chunk.hex()) == "360 " + bytes(range(180)).hex()
     for name, good in [("hello", 2), ("begin", 15), ("commit", 2), ("state", 7), ("ping", 4),
-                       ("pong", 8), ("ack", 1), ("nack", 2), ("event", 5)]:
+                       ("pong", 8), ("ack", 1), ("nack", 2), ("event", 5),
+                       ("capture_start", 3)]:
         for n in (good - 1, good + 1):
             assert harness("unpack", name, hx(bytes(n))) == "err", (name, n)
+    assert harness("unpack", "capture_stop", "00") == "err"
+    for n in (0, 6, 10 + 5, 10 + 6 * 33):                   # 1 … 32 whole samples after 10 bytes
+        assert harness("unpack", "samples", hx(bytes(n))) == "err", n
+    for data in ("-", "00" * 7, "00" * 6 * 33):
+        assert harness("pack", "pack_samples", 0, 0, 2, 0, data) == "err", data
     assert harness("unpack", "chunk", hx(bytes(4))) == "err"          # no data
     assert harness("unpack", "chunk", hx(bytes(4 + 181))) == "err"    # over MAX_CHUNK
     assert harness("unpack", "info", hx(bytes(16))) == "err"
@@ -542,6 +553,23 @@ def test_pen_hello_info_ping_and_refusals(harness):
     host.nack(P.PATTERN_CHUNK, P.pack_pattern_chunk(0, b"") + b"", P.E_BAD_LENGTH)
 
 
+def test_the_due_has_no_sensor_to_capture_from(harness):
+    """No FEATURE_ACCEL in INFO; CAPTURE_START is refused with E_NO_SENSOR whatever it asks for
+    (E_BAD_LENGTH when malformed); CAPTURE_STOP is acknowledged, as any pen with no capture
+    under way acknowledges it, and no SAMPLES ever come."""
+    host = Host(harness)
+    [(_, _, info)] = host.send(P.HELLO, P.pack_hello(1))
+    assert not P.unpack_info(info)[6] & P.FEATURE_ACCEL
+    host.nack(P.CAPTURE_START, P.pack_capture_start(2, P.CAPTURE_RATE), P.E_NO_SENSOR)
+    host.nack(P.CAPTURE_START, P.pack_capture_start(3, 999), P.E_NO_SENSOR)
+    host.nack(P.CAPTURE_START, b"\x02", P.E_BAD_LENGTH)
+    assert host.send(P.CAPTURE_STOP) == [(P.ACK, host.seq, bytes([P.CAPTURE_STOP]))]
+    assert host.send(P.CAPTURE_STOP) == [(P.ACK, host.seq, bytes([P.CAPTURE_STOP]))]
+    host.nack(P.CAPTURE_STOP, b"\x00", P.E_BAD_LENGTH)
+    host.nack(P.SAMPLES, P.pack_samples(0, 0, 2, 0, bytes(6)), P.E_UNKNOWN_TYPE)  # pen → host
+    assert P.FrameDecoder().feed(unhx(harness("poll", 0))) == []
+
+
 def test_upload_commit_and_crc_mismatch_keeps_the_old_pattern(harness):
     rng = np.random.default_rng(4)
     a, b, c = _pattern(rng, 1200), _pattern(rng, 900), _pattern(rng, 1000)
@@ -651,6 +679,10 @@ def _frame_pool(rng, size=600) -> list[bytes]:
                                        P.pack_pattern_commit(int(rng.integers(0, 4)))))
         elif kind == 4:
             pool.append(P.encode_frame(P.HELLO, seq, P.pack_hello(int(rng.integers(0, 3)))))
+        elif kind == 5:
+            pool.append(P.encode_frame(int(rng.choice([P.CAPTURE_START, P.CAPTURE_STOP])), seq,
+                                       P.pack_capture_start(int(rng.integers(0, 17)), 1344)
+                                       if rng.random() < 0.5 else b""))
         else:
             payload = rng.integers(0, 256, int(rng.integers(0, 252)), dtype=np.uint8).tobytes()
             pool.append(P.encode_frame(int(rng.integers(0, 256)), seq, payload))

@@ -3,7 +3,9 @@
  *
  * At boot it plays nothing and holds the pattern of pattern.h (a `realpen export … --format
  * c-header` table, see realpen_config.h); a host uploads other patterns over USB and starts,
- * stops and scales the drive with SET_STATE. Build and wiring: ../README.md.
+ * stops and scales the drive with SET_STATE. It has no accelerometer: INFO does not announce
+ * FEATURE_ACCEL and CAPTURE_START is refused with E_NO_SENSOR (realpen_protocol.c). Build and
+ * wiring: ../README.md.
  *
  * Timing: timer TC1 channel 0 (peripheral ID_TC3, interrupt TC3_IRQn) counts MCK/2 = 42 MHz
  * and interrupts at the pattern's rate. Each interrupt first writes the DAC code computed at

@@ -408,6 +408,56 @@ int rp_unpack_event(const uint8_t *p, size_t n, uint8_t *kind, uint32_t *value) 
     return 0;
 }
 
+size_t rp_pack_capture_start(uint8_t *out, uint8_t range_g, uint16_t rate_hz) {
+    out[0] = range_g;
+    put16(out + 1, rate_hz);
+    return RP_CAPTURE_START_SIZE;
+}
+
+int rp_unpack_capture_start(const uint8_t *p, size_t n, uint8_t *range_g, uint16_t *rate_hz) {
+    if (n != RP_CAPTURE_START_SIZE) {
+        return -1;
+    }
+    *range_g = p[0];
+    *rate_hz = get16(p + 1);
+    return 0;
+}
+
+int rp_unpack_capture_stop(const uint8_t *p, size_t n) {
+    (void)p;
+    return n == 0 ? 0 : -1;
+}
+
+static int samples_bytes_ok(size_t n) {
+    return n > 0 && n % RP_SAMPLE_BYTES == 0 && n <= RP_MAX_BLOCK_SAMPLES * RP_SAMPLE_BYTES;
+}
+
+size_t rp_pack_samples(uint8_t *out, const rp_samples *s, const uint8_t *data, size_t n) {
+    if (!samples_bytes_ok(n)) {
+        return 0;
+    }
+    put32(out, s->first);
+    put32(out + 4, s->t_us);
+    out[8] = s->range_g;
+    out[9] = s->flags;
+    memcpy(out + RP_SAMPLES_HEAD, data, n);
+    return RP_SAMPLES_HEAD + n;
+}
+
+int rp_unpack_samples(const uint8_t *p, size_t n, rp_samples *s, const uint8_t **data,
+                      size_t *data_n) {
+    if (n < RP_SAMPLES_HEAD || !samples_bytes_ok(n - RP_SAMPLES_HEAD)) {
+        return -1;
+    }
+    s->first = get32(p);
+    s->t_us = get32(p + 4);
+    s->range_g = p[8];
+    s->flags = p[9];
+    *data = p + RP_SAMPLES_HEAD;
+    *data_n = n - RP_SAMPLES_HEAD;
+    return 0;
+}
+
 /* --- the pen --------------------------------------------------------------------------- */
 
 static void send(rp_pen *pen, uint8_t type, uint8_t seq, const uint8_t *payload, size_t n) {
@@ -621,6 +671,20 @@ void rp_pen_handle(rp_pen *pen, const rp_frame *f) {
         } else {
             send(pen, RP_PONG, f->seq, p,
                  rp_pack_pong(p, token, pen->clock ? pen->clock(pen->ctx) : 0u));
+        }
+        break;
+    case RP_CAPTURE_START:
+        /* The Due has no accelerometer (no RP_FEATURE_ACCEL): whatever range and rate are
+         * asked for, there is nothing to capture from. */
+        nack(pen, f, f->length == RP_CAPTURE_START_SIZE ? RP_E_NO_SENSOR : RP_E_BAD_LENGTH);
+        break;
+    case RP_CAPTURE_STOP:
+        /* Stop is idempotent, as on the Pico: with no capture under way there is nothing to
+         * flush, so the ACK comes at once and says that no SAMPLES follow. */
+        if (rp_unpack_capture_stop(f->payload, f->length) != 0) {
+            nack(pen, f, RP_E_BAD_LENGTH);
+        } else {
+            ack(pen, f);
         }
         break;
     default:

@@ -1,6 +1,7 @@
 /* The RealPen pen protocol in plain C99 (docs/protocol.md): CRC-16/CCITT-FALSE, COBS, a
  * streaming frame decoder with a fixed buffer, the message structs, and the pen's side of the
- * conversation (HELLO, pattern upload, SET_STATE, PING).
+ * conversation (HELLO, pattern upload, SET_STATE, PING, and capture, which the Due refuses: it
+ * has no accelerometer).
  *
  * It mirrors src/realpen/device/protocol.py byte for byte and passes the same test vectors
  * (tests/data/protocol_vectors.json, checked by tests/test_due.py). No malloc, no globals:
@@ -42,6 +43,9 @@ extern "C" {
 #define RP_ACK 0x40u
 #define RP_NACK 0x41u
 #define RP_EVENT 0x50u
+#define RP_CAPTURE_START 0x60u
+#define RP_CAPTURE_STOP 0x61u
+#define RP_SAMPLES 0x62u
 
 /* NACK codes. */
 #define RP_E_UNKNOWN_TYPE 1u
@@ -55,6 +59,8 @@ extern "C" {
 #define RP_E_NO_UPLOAD 9u
 #define RP_E_BAD_RATE 10u
 #define RP_E_BAD_STATE 11u
+#define RP_E_NO_SENSOR 12u
+#define RP_E_BAD_CAPTURE 13u
 
 /* EVENT kinds. */
 #define RP_EV_BOOT 1u
@@ -62,6 +68,8 @@ extern "C" {
 #define RP_EV_BATTERY 3u
 #define RP_EV_PATTERN 4u
 #define RP_EV_DECODE_ERRORS 5u
+#define RP_EV_OVERRUN 6u          /* sensor FIFO overruns in this capture so far */
+#define RP_EV_CAPTURE_DROPPED 7u  /* SAMPLES blocks of this capture the pen could not send */
 
 #define RP_FORMAT_S16LE 1u
 
@@ -69,6 +77,12 @@ extern "C" {
 #define RP_FEATURE_BLE 2u
 #define RP_FEATURE_BATTERY 4u
 #define RP_FEATURE_RATE 8u
+#define RP_FEATURE_ACCEL 16u /* an accelerometer to capture from; the Due has none */
+
+/* Capture (SAMPLES blocks): at most a LIS3DH FIFO's worth of x, y, z int16 LE samples. */
+#define RP_MAX_BLOCK_SAMPLES 32u
+#define RP_SAMPLE_BYTES 6u
+#define RP_SAMPLES_OVERRUN 1u /* SAMPLES flags bit: the sensor's FIFO overran before the block */
 
 /* Payload sizes of the fixed structs (little-endian, packed). */
 #define RP_HELLO_SIZE 2u
@@ -82,6 +96,8 @@ extern "C" {
 #define RP_ACK_SIZE 1u
 #define RP_NACK_SIZE 2u
 #define RP_EVENT_SIZE 5u
+#define RP_CAPTURE_START_SIZE 3u
+#define RP_SAMPLES_HEAD 10u /* plus 1 … RP_MAX_BLOCK_SAMPLES samples of RP_SAMPLE_BYTES */
 
 /* --- checksums ------------------------------------------------------------------------- */
 
@@ -187,6 +203,21 @@ size_t rp_pack_nack(uint8_t *out, uint8_t type, uint8_t code);
 int rp_unpack_nack(const uint8_t *p, size_t n, uint8_t *type, uint8_t *code);
 size_t rp_pack_event(uint8_t *out, uint8_t kind, uint32_t value);
 int rp_unpack_event(const uint8_t *p, size_t n, uint8_t *kind, uint32_t *value);
+/* CAPTURE_START: range in g, output rate in Hz. CAPTURE_STOP has no payload: its unpack only
+ * checks that. SAMPLES: first sample's index, the pen's µs clock, range in g, flags, then
+ * 1 … RP_MAX_BLOCK_SAMPLES samples (data, n bytes; pack returns 0 for a count out of range). */
+size_t rp_pack_capture_start(uint8_t *out, uint8_t range_g, uint16_t rate_hz);
+int rp_unpack_capture_start(const uint8_t *p, size_t n, uint8_t *range_g, uint16_t *rate_hz);
+int rp_unpack_capture_stop(const uint8_t *p, size_t n);
+typedef struct {
+    uint32_t first; /* index of the block's first sample since CAPTURE_START */
+    uint32_t t_us;  /* the pen's clock when the sensor's FIFO level was read, µs */
+    uint8_t range_g;
+    uint8_t flags;  /* RP_SAMPLES_OVERRUN */
+} rp_samples;
+size_t rp_pack_samples(uint8_t *out, const rp_samples *s, const uint8_t *data, size_t n);
+int rp_unpack_samples(const uint8_t *p, size_t n, rp_samples *s, const uint8_t **data,
+                      size_t *data_n);
 
 /* --- the pen --------------------------------------------------------------------------- */
 

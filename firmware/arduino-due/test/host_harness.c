@@ -6,8 +6,9 @@
  *   cobs_enc HEX | cobs_dec HEX           → HEX, or "err"
  *   frame TYPE SEQ HEX                    → the wire frame HEX
  *   decode HEX                            → "FRAMES ERRORS [TYPE,SEQ,HEX …]"
- *   pack NAME ARGS…                       → payload HEX (info's name as HEX)
- *   unpack NAME HEX                       → the fields in decimal, or "err"
+ *   pack NAME ARGS…                       → payload HEX (info's name, chunk's and samples'
+ *                                           data as HEX), or "err" for samples out of range
+ *   unpack NAME HEX                       → the fields in decimal (data as HEX), or "err"
  *   pen RATE BUFFER_BYTES GAIN_CAP NAMEHEX → "ok": a fresh pen and player
  *   feed HEX                              → what the pen sent back, HEX
  *   poll UNDERRUNS                        → what the pen sent back, HEX
@@ -213,6 +214,22 @@ static void do_pack(char **tok) {
         n = rp_pack_nack(p, (uint8_t)arg(tok, 2), (uint8_t)arg(tok, 3));
     } else if (strcmp(name, "pack_event") == 0) {
         n = rp_pack_event(p, (uint8_t)arg(tok, 2), (uint32_t)arg(tok, 3));
+    } else if (strcmp(name, "pack_capture_start") == 0) {
+        n = rp_pack_capture_start(p, (uint8_t)arg(tok, 2), (uint16_t)arg(tok, 3));
+    } else if (strcmp(name, "pack_capture_stop") == 0) {
+        n = 0; /* no payload */
+    } else if (strcmp(name, "pack_samples") == 0) {
+        rp_samples s;
+        s.first = (uint32_t)arg(tok, 2);
+        s.t_us = (uint32_t)arg(tok, 3);
+        s.range_g = (uint8_t)arg(tok, 4);
+        s.flags = (uint8_t)arg(tok, 5);
+        m = unhex(tok[6], scratch);
+        n = rp_pack_samples(p, &s, scratch, m);
+        if (n == 0) {
+            fputs("err", stdout);
+            return;
+        }
     } else {
         fputs("unknown", stdout);
         return;
@@ -275,6 +292,28 @@ static void do_unpack(char **tok) {
         rc = rp_unpack_event(bytes, n, &k, &v);
         if (rc == 0) {
             printf("%u %lu", k, (unsigned long)v);
+        }
+    } else if (strcmp(name, "capture_start") == 0) {
+        uint8_t range_g;
+        uint16_t rate_hz;
+        rc = rp_unpack_capture_start(bytes, n, &range_g, &rate_hz);
+        if (rc == 0) {
+            printf("%u %u", range_g, rate_hz);
+        }
+    } else if (strcmp(name, "capture_stop") == 0) {
+        rc = rp_unpack_capture_stop(bytes, n);
+        if (rc == 0) {
+            fputs("-", stdout);
+        }
+    } else if (strcmp(name, "samples") == 0) {
+        rp_samples s;
+        const uint8_t *d;
+        size_t dn;
+        rc = rp_unpack_samples(bytes, n, &s, &d, &dn);
+        if (rc == 0) {
+            printf("%lu %lu %u %u ", (unsigned long)s.first, (unsigned long)s.t_us, s.range_g,
+                   s.flags);
+            print_hex(d, dn);
         }
     } else {
         uint16_t v16;

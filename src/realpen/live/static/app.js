@@ -17,6 +17,9 @@
 // uploads its pattern. Whatever the pen does, the page's own sound and ink go on. When the
 // server itself drives a pen (the serve command's device option), the panel shows that bridge's
 // status too. window.realpen.penDevice is the link's status; window.realpen.penLink the link.
+// The panel's headline names the pen connected, on the page's side or the server's; with
+// Tactile chosen and nothing to play it on (no pen either side, Tactile → R off) the status bar
+// says so where the gain meter was.
 //
 // URL parameters preset the page for a study: ?pen=marker&modality=tactile&ink=hidden&tactile=audio
 //
@@ -240,6 +243,7 @@ function selectModality(value) {
   state.modality = value;
   mark('modalities', value);
   saved.set('modality', value);
+  scheduleStatus();
 }
 
 function selectInk(value) {
@@ -314,7 +318,46 @@ function openCalibration() {
 
 const PEN_KIND = { usb: 'USB', ble: 'Bluetooth' };
 let bridge = null; // the server's GET /api/device, when it drives a pen
+let bridgeAsked = false; // the server has been asked once: until then its pen is unknown
 let bridgeTimer = null;
+
+/** The server's pen device (not its command log, which drives nothing), or null. */
+function serverPen() {
+  return bridge && bridge.kind !== 'log' ? bridge : null;
+}
+
+/** Where the server's pen is, as its device string says ("serial:/dev/ttyACM0" → the port). */
+function serverPenPlace(server) {
+  if (server.kind === 'sim') return 'simulated';
+  if (server.kind === 'ble') return 'Bluetooth';
+  const name = String(server.name || '');
+  return server.kind === 'serial' ? name.replace(/^serial:/, '') : name;
+}
+
+/** "Pen: RealPen (this page, USB)", "Pen: RealPen (server, /dev/ttyACM0)", both when both are
+ *  connected, or "Pen: none connected". */
+function penHeadline() {
+  const s = penLink.status;
+  const server = serverPen();
+  const pens = [];
+  if (penLink.connected && s.info) {
+    pens.push(`${s.info.name || 'a pen'} (this page, ${PEN_KIND[s.kind] || s.kind})`);
+  }
+  if (server && server.connected === true) {
+    const name = (server.info && server.info.name) || 'a pen';
+    pens.push(`${name} (server, ${serverPenPlace(server)})`);
+  }
+  return `Pen: ${pens.join(' and ') || 'none connected'}`;
+}
+
+/** Whether anything plays the tactile pattern: a pen on either side (a server device that
+ *  cannot say whether it is connected is given the benefit of the doubt) or the right audio
+ *  channel (Tactile → R). */
+function tactileHasOutlet() {
+  const server = serverPen();
+  return penLink.connected || Boolean(server && server.connected !== false)
+    || Boolean(state.tactileAudio);
+}
 
 function setupPenPanel() {
   const can = penSupport();
@@ -350,9 +393,14 @@ async function pollBridge() {
   clearTimeout(bridgeTimer);
   try {
     const response = await fetch(withToken('api/device'), { cache: 'no-store' });
-    if (response.status === 404) return; // a server without the route: nothing to show
+    if (response.status === 404) { // a server without the route: nothing to show
+      bridgeAsked = true;
+      scheduleStatus();
+      return;
+    }
     bridge = response.ok ? await response.json() : null;
   } catch { bridge = null; }
+  bridgeAsked = true;
   scheduleStatus();
   bridgeTimer = setTimeout(pollBridge, $('pen-panel').hidden ? 5000 : 1500);
 }
@@ -361,7 +409,8 @@ function renderPen() {
   const s = penLink.status;
   const button = $('pen-device');
   button.dataset.state = s.state;
-  const server = bridge && bridge.kind !== 'log' ? bridge : null;
+  const server = serverPen();
+  $('pen-panel-title').textContent = penHeadline();
   let short = 'Pen';
   if (penLink.connected) short = `Pen · ${PEN_KIND[s.kind] || s.kind}`;
   else if (s.state === 'connecting') short = 'Pen · connecting…';
@@ -370,7 +419,8 @@ function renderPen() {
   else if (server) short = `Pen · server${server.connected === false ? ' (lost)' : ''}`;
   $('pen-device-text').textContent = short;
   button.dataset.server = server ? String(server.connected) : '';
-  $('pen-status').textContent = s.message;
+  // The link's idle line is said of this page: the headline above may name the server's pen.
+  $('pen-status').textContent = s.state === 'idle' ? 'No pen connected to this page.' : s.message;
   $('pen-status').dataset.state = s.state;
   const meta = [];
   if (penLink.connected && s.battery !== null) meta.push(`battery ${s.battery} %`);
@@ -437,6 +487,13 @@ function renderStatus() {
   const shown = state.coupling ? Math.min(state.targetGain / state.coupling.a_max, 1) : 0;
   $('st-gain-bar').style.width = `${(shown * 100).toFixed(1)}%`;
   $('st-gain-value').textContent = state.targetGain.toFixed(2);
+  // Tactile alone with nowhere to play it: words instead of a meter moving in silence.
+  const unplayed = state.modality === 'tactile' && bridgeAsked && !tactileHasOutlet();
+  $('st-gain').hidden = unplayed;
+  $('st-tactile').hidden = !unplayed;
+  $('st-tactile').textContent = unplayed
+    ? 'Tactile: no pen connected and Tactile\u00a0\u2192\u00a0R is off \u2014 nothing plays the '
+      + 'vibration' : '';
   renderPen();
 }
 

@@ -40,6 +40,9 @@ export const PONG = 0x31;
 export const ACK = 0x40;
 export const NACK = 0x41;
 export const EVENT = 0x50;
+export const CAPTURE_START = 0x60;
+export const CAPTURE_STOP = 0x61;
+export const SAMPLES = 0x62;
 
 export const E_UNKNOWN_TYPE = 1;
 export const E_BAD_LENGTH = 2;
@@ -52,6 +55,8 @@ export const E_INCOMPLETE = 8;
 export const E_NO_UPLOAD = 9;
 export const E_BAD_RATE = 10;
 export const E_BAD_STATE = 11;
+export const E_NO_SENSOR = 12;
+export const E_BAD_CAPTURE = 13;
 
 /** @type {Readonly<Record<number, string>>} */
 export const NACK_TEXT = {
@@ -66,6 +71,8 @@ export const NACK_TEXT = {
   [E_NO_UPLOAD]: 'no pattern upload under way',
   [E_BAD_RATE]: 'sample rate not supported',
   [E_BAD_STATE]: 'state value out of range',
+  [E_NO_SENSOR]: 'the pen has no accelerometer',
+  [E_BAD_CAPTURE]: 'capture range or rate not supported',
 };
 
 /** @type {Readonly<Record<number, string>>} */
@@ -73,6 +80,7 @@ export const TYPE_NAMES = {
   [HELLO]: 'HELLO', [INFO]: 'INFO', [PATTERN_BEGIN]: 'PATTERN_BEGIN',
   [PATTERN_CHUNK]: 'PATTERN_CHUNK', [PATTERN_COMMIT]: 'PATTERN_COMMIT', [SET_STATE]: 'SET_STATE',
   [PING]: 'PING', [PONG]: 'PONG', [ACK]: 'ACK', [NACK]: 'NACK', [EVENT]: 'EVENT',
+  [CAPTURE_START]: 'CAPTURE_START', [CAPTURE_STOP]: 'CAPTURE_STOP', [SAMPLES]: 'SAMPLES',
 };
 
 export const EV_BOOT = 1; // value: firmware boot count or 0
@@ -80,11 +88,14 @@ export const EV_UNDERRUN = 2; // value: underruns so far
 export const EV_BATTERY = 3; // value: battery voltage in mV
 export const EV_PATTERN = 4; // value: id of the pattern now playing
 export const EV_DECODE_ERRORS = 5; // value: frames dropped so far
+export const EV_OVERRUN = 6; // value: sensor FIFO overruns in this capture so far
+export const EV_CAPTURE_DROPPED = 7; // value: SAMPLES blocks of this capture not sent so far
 
 /** @type {Readonly<Record<number, string>>} */
 export const EVENT_NAMES = {
   [EV_BOOT]: 'boot', [EV_UNDERRUN]: 'underrun', [EV_BATTERY]: 'battery', [EV_PATTERN]: 'pattern',
-  [EV_DECODE_ERRORS]: 'decode_errors',
+  [EV_DECODE_ERRORS]: 'decode_errors', [EV_OVERRUN]: 'overrun',
+  [EV_CAPTURE_DROPPED]: 'capture_dropped',
 };
 
 export const FORMAT_S16LE = 1;
@@ -92,6 +103,17 @@ export const FEATURE_USB = 1;
 export const FEATURE_BLE = 2;
 export const FEATURE_BATTERY = 4;
 export const FEATURE_RATE = 8;
+export const FEATURE_ACCEL = 16; // an accelerometer (LIS3DH) the host can capture from
+
+// Capture: the LIS3DH's full-scale ranges (g) and output rates (Hz); 1344 Hz is the method's.
+/** @type {readonly number[]} */
+export const CAPTURE_RANGES = Object.freeze([2, 4, 8, 16]);
+/** @type {readonly number[]} */
+export const CAPTURE_RATES = Object.freeze([1, 10, 25, 50, 100, 200, 400, 1344]);
+export const CAPTURE_RATE = 1344;
+export const MAX_BLOCK_SAMPLES = 32; // the LIS3DH FIFO depth
+export const SAMPLE_BYTES = 6; // x, y, z int16 LE, left-justified as the sensor gives them
+export const SAMPLES_OVERRUN = 1; // SAMPLES flags bit: the FIFO overran before this block
 
 export const GAIN_ONE = 65535; // SET_STATE gain: 65535 = the firmware's capped full drive
 export const RATE_ONE = 4096; // SET_STATE rate, Q12 playback-rate factor
@@ -650,6 +672,85 @@ export function unpackEvent(p) {
   return [dv.getUint8(0), dv.getUint32(1, true)];
 }
 
+/** CAPTURE_START {range_g u8, rate_hz u16}.
+ * @param {number} rangeG full scale in g, one of CAPTURE_RANGES
+ * @param {number} rateHz output rate in Hz, one of CAPTURE_RATES
+ * @returns {Bytes}
+ */
+export function packCaptureStart(rangeG, rateHz) {
+  const [bytes, dv] = newPayload(3);
+  dv.setUint8(0, rangeG & 0xff);
+  dv.setUint16(1, u16(rateHz), true);
+  return bytes;
+}
+
+/**
+ * @param {BytesLike} p
+ * @returns {[rangeG: number, rateHz: number]}
+ */
+export function unpackCaptureStart(p) {
+  const [, dv] = view(p, 3, 'CAPTURE_START');
+  return [dv.getUint8(0), dv.getUint16(1, true)];
+}
+
+/** CAPTURE_STOP: no payload; the pen's ACK follows the capture's last SAMPLES block.
+ * @returns {Bytes}
+ */
+export function packCaptureStop() {
+  return new Uint8Array(0);
+}
+
+/**
+ * @param {BytesLike} p
+ * @returns {null} (protocol.py's None), after checking that the payload is empty
+ */
+export function unpackCaptureStop(p) {
+  view(p, 0, 'CAPTURE_STOP');
+  return null;
+}
+
+/**
+ * @param {number} count sample bytes of a SAMPLES block
+ * @returns {boolean} whether they are 1 … MAX_BLOCK_SAMPLES whole samples
+ */
+function wholeBlock(count) {
+  return count > 0 && count % SAMPLE_BYTES === 0 && count <= MAX_BLOCK_SAMPLES * SAMPLE_BYTES;
+}
+
+/** SAMPLES {first u32, t_us u32, range_g u8, flags u8} + 1 … MAX_BLOCK_SAMPLES samples of
+ *  x, y, z (int16 LE, left-justified as the sensor gives them).
+ * @param {number} first index of the block's first sample since CAPTURE_START (wraps at 2**32)
+ * @param {number} tUs the pen's clock in µs when the FIFO level was read (wraps at 2**32)
+ * @param {number} rangeG full scale in g
+ * @param {number} flags SAMPLES_OVERRUN
+ * @param {BytesLike} data the samples' bytes
+ * @returns {Bytes}
+ */
+export function packSamples(first, tUs, rangeG, flags, data) {
+  const body = bytesOf(data);
+  if (!wholeBlock(body.length)) throw new ProtocolError(`SAMPLES data of ${body.length} bytes`);
+  const [bytes, dv] = newPayload(10 + body.length);
+  dv.setUint32(0, u32(first), true);
+  dv.setUint32(4, u32(tUs), true);
+  dv.setUint8(8, rangeG & 0xff);
+  dv.setUint8(9, flags & 0xff);
+  bytes.set(body, 10);
+  return bytes;
+}
+
+/**
+ * @param {BytesLike} p
+ * @returns {[first: number, tUs: number, rangeG: number, flags: number, data: Bytes]}
+ */
+export function unpackSamples(p) {
+  const [bytes, dv] = view(p, 10, 'SAMPLES', true);
+  if (!wholeBlock(bytes.length - 10)) {
+    throw new ProtocolError(`SAMPLES: payload of ${bytes.length} bytes`);
+  }
+  return [dv.getUint32(0, true), dv.getUint32(4, true), dv.getUint8(8), dv.getUint8(9),
+    bytes.slice(10)];
+}
+
 /**
  * Each message's pack and unpack function by protocol.py's name of its pack function
  * ('pack_hello' → [packHello, unpackHello]), as the test vectors name them.
@@ -667,6 +768,9 @@ export const MESSAGES = {
   pack_ack: [packAck, unpackAck],
   pack_nack: [packNack, unpackNack],
   pack_event: [packEvent, unpackEvent],
+  pack_capture_start: [packCaptureStart, unpackCaptureStart],
+  pack_capture_stop: [packCaptureStop, unpackCaptureStop],
+  pack_samples: [packSamples, unpackSamples],
 };
 
 /** "0a1b…" ↔ bytes: the test vectors carry bytes as hex.
