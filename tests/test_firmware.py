@@ -947,7 +947,8 @@ def test_end_to_end_upload_play_gain_stop_and_a_corrupted_upload_keeps_the_old_p
     pattern = rng.integers(-30000, 30000, 1200).astype(np.int16)  # 150 ms: many loops
     other = rng.integers(-30000, 30000, 600).astype(np.int16)
     wav, trace = tmp_path / "played.wav", tmp_path / "trace.jsonl"
-    with SimPen(record=wav, trace=trace) as pen:
+    # A stalled process is a stalled pen here (no steady clock): the stall must run it dry.
+    with SimPen(record=wav, trace=trace, steady_clock=False) as pen:
         host = Host(pen.port)
         try:
             kind, payload = host.reply(host.send(P.HELLO, P.pack_hello(P.PROTOCOL_VERSION)))

@@ -29,16 +29,32 @@ SENSITIVITY_MG = ((1, 2, 4, 12), (4, 8, 16, 48))  # mg/digit by FS code: high re
 
 class RealClock:
     """The sim's µs clock: ``time.ticks_us`` accumulated so that it never wraps; a transfer's
-    time is spent for real (the CPU waits on the bus, as on the Pico)."""
+    time is spent for real (the CPU waits on the bus, as on the Pico).
 
-    def __init__(self):
+    ``max_step_us``: a longer step between two readings counts as only this long, and the
+    rest is added to :attr:`stalled_us` (and passed to ``on_stall(us)``). The simulated pen
+    then stands still while the host's scheduler holds its process back — a pen has its
+    processor to itself, and a desktop scheduler stalls a process for 10–20 ms now and then
+    even on an idle machine. None: every step counts (the process's stalls are the pen's).
+    """
+
+    def __init__(self, max_step_us=None, on_stall=None):
         self.last = time.ticks_us()
         self.us = 0
+        self.max_step_us = max_step_us
+        self.on_stall = on_stall
+        self.stalled_us = 0
 
     def now(self):
         t = time.ticks_us()
-        self.us += time.ticks_diff(t, self.last)
+        step = time.ticks_diff(t, self.last)
         self.last = t
+        if self.max_step_us is not None and step > self.max_step_us:
+            self.stalled_us += step - self.max_step_us
+            if self.on_stall is not None:
+                self.on_stall(step - self.max_step_us)
+            step = self.max_step_us
+        self.us += step
         return self.us
 
     def spend(self, us):
@@ -62,9 +78,11 @@ class SimI2C:
     """``machine.I2C``'s ``readfrom_mem_into`` / ``writeto_mem`` against one device model,
     charging each transfer ``(bytes × 9 + 2) / freq`` plus ``overhead_us`` of the clock
     (START, address, sub-address, repeated START and address, data, STOP). ``busy_us`` adds up
-    what the bus took; ``longest_us`` is the longest single transfer."""
+    what the bus took; ``longest_us`` is the longest single transfer. ``before``: called before
+    each transfer (the simulator's audio sink, which on the Pico runs from an interrupt)."""
 
     def __init__(self, device, clock, freq=400000, overhead_us=10):
+        self.before = None
         self.device = device
         self.clock = clock
         self.freq = freq
@@ -82,12 +100,16 @@ class SimI2C:
         self.clock.spend(us)
 
     def readfrom_mem_into(self, addr, reg, buf):
+        if self.before is not None:
+            self.before()
         if addr != self.device.address:
             raise OSError(19)  # ENODEV: nobody acknowledged the address
         self.device.read(reg, buf)
         self._charge(3 + len(buf))
 
     def writeto_mem(self, addr, reg, buf):
+        if self.before is not None:
+            self.before()
         if addr != self.device.address:
             raise OSError(19)
         self.device.write(reg, buf)
@@ -110,10 +132,18 @@ class SimActuator:
         self.axes = axes
         self.ring = [0.0] * self.RING
         self.written = 0  # DAC samples filtered so far
+        self.quiet_from = 0  # the output is 0 from this DAC index on (None: it moves)
         self.x1 = self.x2 = self.y1 = self.y2 = 0.0
 
     def play(self, first, samples):
         """Filter the DAC's samples from index ``first`` (earlier ones not given are 0)."""
+        if self.quiet_from is not None and not any(samples):
+            self.written = first + len(samples)  # still at rest: nothing to compute
+            return
+        if self.quiet_from is not None:
+            self._zero_ring(self.quiet_from, first)
+            self.written = first
+            self.quiet_from = None
         ring = self.ring
         mask = self.RING
         b0, b1, b2, a1, a2 = self.b0, self.b1, self.b2, self.a1, self.a2
@@ -133,11 +163,23 @@ class SimActuator:
             index += 1
         self.x1, self.x2, self.y1, self.y2 = x1, x2, y1, y2
         self.written = index
+        if (not any(samples) and -1e-9 < y1 < 1e-9 and -1e-9 < y2 < 1e-9
+                and x1 == 0 and x2 == 0):
+            # At rest: from here on the output is 0 until the DAC plays something again.
+            self.x1 = self.x2 = self.y1 = self.y2 = 0.0
+            self.quiet_from = index
+
+    def _zero_ring(self, start, end):
+        ring = self.ring
+        for index in range(max(start, end - self.RING), end):
+            ring[index % self.RING] = 0.0
 
     def value_at(self, position):
         """Acceleration (g, along the actuator's axis) at a DAC position (samples)."""
         i = int(position)
         if i < 0 or i + 1 >= self.written or self.written - i >= self.RING:
+            return 0.0
+        if self.quiet_from is not None and i >= self.quiet_from:
             return 0.0
         frac = position - i
         a = self.ring[i % self.RING]

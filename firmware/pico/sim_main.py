@@ -19,6 +19,10 @@ Arguments are ``key=value`` words:
   ``name=RealPen``: the pen's settings (defaults from config.py).
 - ``nonblocking=1``: stdin is in non-blocking mode (SimPen sets it), so reads take what is there;
   otherwise bytes are read one at a time while poll says there are more.
+- ``steady=1``: the simulated pen's clock (its DAC, its sensor, the PONG and SAMPLES times)
+  stands still while the host's scheduler holds the process back: a step of more than
+  ``STEADY_STEP_US`` between two readings counts as that long (a ``stall`` trace line says how
+  much was left out). Without it a stalled process is a stalled pen: its sink runs dry.
 - ``sensor=1``: a simulated LIS3DH on a simulated 400 kHz I2C bus (``sim_lis3dh.py``), driven by
   the firmware's own driver (``rp_lis3dh.py``, ``rp_capture.py``); INFO then says
   accelerometer. With it: ``accel=PATH`` what the pen feels while writing, float32 x, y, z in g
@@ -40,11 +44,16 @@ import time
 from array import array
 
 import config
+import rp_pen
 import rp_protocol as P
 from rp_pen import Pen
 from sim_lis3dh import RealClock
 
 QUEUE_MS = 8  # the most audio rendered ahead of the virtual DAC
+# With steady=1, the longest step of the pen's clock between two readings: the main loop reads
+# it at least every 1.2 ms (it polls the host for at most 1 ms; a bus transfer takes 0.8 ms), so
+# a longer step is a stall.
+STEADY_STEP_US = 2000
 FEED_PIECE = 64  # bytes handed to the pen between two looks at the sink
 
 
@@ -84,10 +93,12 @@ def file_samples(path):
         return 0
 
 
-def make_sender(out, blocking):
+def make_sender(out, blocking, idle=None):
     """A send(data) for the pen: writes all of ``data`` to ``out``; when the host does not read
     (a non-blocking pty whose buffer is full) it waits up to 200 ms, then drops the rest (the
-    host's decoder resynchronises at the next frame)."""
+    host's decoder resynchronises at the next frame) and returns False. ``idle``: a list whose
+    first item, when set, is called while it waits (the sink: on the Pico the audio runs from
+    its interrupt whatever the USB does)."""
     poller = select.poll()
     poller.register(out, select.POLLOUT)
 
@@ -103,10 +114,13 @@ def make_sender(out, blocking):
             if count:
                 done += count
             elif waited >= 200:
-                return
+                return False
             else:
-                poller.poll(5)
-                waited += 5
+                if idle is not None and idle[0] is not None:
+                    idle[0]()
+                poller.poll(1)
+                waited += 1
+        return True
 
     return send
 
@@ -206,7 +220,16 @@ def run(options):
         trace.write({"event": "swap", "t_ns": time.time_ns(), "sample": sample,
                      "id": pattern_id})
 
-    clock = RealClock()
+    steady = options.get("steady", "0") == "1"
+    if steady:
+        def on_stall(us):
+            trace.write({"event": "stall", "t_ns": time.time_ns(), "us": us})
+
+        clock = RealClock(STEADY_STEP_US, on_stall)
+        # The pen's own clock (PONG, SAMPLES, when the FIFO is looked at) is the same clock.
+        rp_pen.ticks_us = clock.now
+    else:
+        clock = RealClock()
     sensor = None
     actuator = None
     features = P.FEATURE_USB | P.FEATURE_RATE
@@ -218,7 +241,8 @@ def run(options):
               on_state=on_state, on_swap=on_swap, sensor=sensor)
     pen.samples = first
     stdin = sys.stdin.buffer
-    link = pen.add_link(make_sender(sys.stdout.buffer, not nonblocking), "pty")
+    pump = [None]  # the sink, once there is one: the sender pumps it while the host lags
+    link = pen.add_link(make_sender(sys.stdout.buffer, not nonblocking, pump), "pty")
     inbuf = bytearray(512)
     one = bytearray(1)
     poller = select.poll()
@@ -228,16 +252,19 @@ def run(options):
                  "block": config.BLOCK_SAMPLES})
     pen.boot()
     sink = Sink(pen, rate, config.BLOCK_SAMPLES, record, trace, clock, actuator)
+    pump[0] = sink.pump
     capture_every_us = int(options.get("capture_every_ms", "0")) * 1000
     capture_at = clock.now()
     if sensor is not None:
         model.dac_position = sink.dac_position
-        sensor.between = sink.pump  # the I2S refill runs between two transfers on the Pico
+        sensor.bus.before = sink.pump  # on the Pico the I2S refill runs between transfers
         trace.write({"event": "sensor", "t_ns": time.time_ns(), "rate": model.rate_error})
     try:
         while True:
             wait_ms = sink.pump()
             # Sleep until one more block fits in the queue, or until the host writes.
+            if steady and wait_ms > 1:
+                wait_ms = 1  # short steps: a longer one is then surely a stall
             for _obj, flags in poller.poll(wait_ms):
                 if flags & (select.POLLHUP | select.POLLERR) and not flags & select.POLLIN:
                     raise EOFError  # the pseudo-terminal is gone: the host side closed

@@ -104,6 +104,10 @@ class SimPen:
         capture_every_ms: look at the sensor's FIFO only this often (0: every main-loop pass);
             a long interval makes the FIFO overrun, on purpose.
         seed: the sensor noise's seed.
+        steady_clock: the pen's clock stands still while this machine's scheduler holds the
+            firmware's process back (a ``stall`` trace event says how long), so that a busy
+            host does not make the pen underrun or its sensor's FIFO overrun; False: a
+            stalled process is a stalled pen (its sink runs dry, as a test of underruns wants).
 
     Relative paths are taken from the working folder at construction (the firmware itself runs
     in ``firmware/pico``). Use as a context manager, or call :meth:`start` and :meth:`stop`;
@@ -115,7 +119,8 @@ class SimPen:
                  protocol_version: int | None = None, micropython: str | None = None,
                  sensor: bool = True, accelerometer: Path | None = None,
                  actuator: str = "lra:f0=175,q=8", mount_g: float = 1.0, noise_g: float = 0.005,
-                 rate_error: float = 0.013, capture_every_ms: int = 0, seed: int = 0):
+                 rate_error: float = 0.013, capture_every_ms: int = 0, seed: int = 0,
+                 steady_clock: bool = True):
         if isinstance(rate, bool) or not isinstance(rate, int) or not 1000 <= rate <= 192000:
             raise RealPenError(f"simulated pen: sample rate must be an integer 1000 … 192000 Hz, "
                                f"got {rate!r}")
@@ -140,6 +145,7 @@ class SimPen:
         self.rate_error = float(rate_error)
         self.capture_every_ms = int(capture_every_ms)
         self.seed = int(seed)
+        self.steady_clock = bool(steady_clock)
         if not -0.1 < self.rate_error < 0.1:
             raise RealPenError(f"simulated pen: the sensor's rate error must be within ±10 %, "
                                f"got {rate_error!r}")
@@ -342,6 +348,8 @@ class SimPen:
             if self.protocol_version is not None:
                 args.append(f"protocol={int(self.protocol_version)}")
             args += self._sensor_args
+            if self.steady_clock:
+                args.append("steady=1")
             self._trace_seen = self._trace_path.stat().st_size
             with open(self._stderr_path, "ab") as stderr:
                 self._process = subprocess.Popen(
@@ -352,6 +360,7 @@ class SimPen:
             raise
         finally:
             os.close(master)  # the child holds it; when it dies the host's port hangs up
+        _raise_priority(self._process.pid)
         # Keeping the slave open here keeps the master readable while no host has the port
         # open (otherwise the firmware's reads fail with EIO between hosts).
         self._slave = slave
@@ -425,6 +434,17 @@ class SimPen:
         if self._workdir is not None:
             shutil.rmtree(self._workdir, ignore_errors=True)
             self._workdir = None
+
+
+def _raise_priority(pid: int) -> None:
+    """Run the firmware ahead of ordinary processes where allowed (root): on the pen it has the
+    processor to itself, and a busy host that holds it back for 12 ms makes the simulated
+    accelerometer's FIFO overrun (which the pen then reports, as it should). Elsewhere it runs
+    at the ordinary priority."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, -5)
+    except (OSError, AttributeError):
+        pass
 
 
 def read_trace(path: Path) -> list[dict]:
