@@ -5,8 +5,12 @@
 - :mod:`~realpen.device.transport` — byte pipes to a pen: a serial port (USB CDC, a
   pseudo-terminal) through pyserial, or Bluetooth LE through bleak (``ble:NAME``).
 - :mod:`~realpen.device.client` — :class:`~realpen.device.client.PenClient`: HELLO, pattern
-  upload, SET_STATE, PING and the pen's events over a transport, with one-line errors
-  (:class:`~realpen.device.transport.DeviceError`).
+  upload, SET_STATE, PING, the pen's events and its accelerometer's SAMPLES blocks over a
+  transport, with one-line errors (:class:`~realpen.device.transport.DeviceError`).
+- :mod:`~realpen.device.capture` — accelerometer captures: the blocks placed on the sensor's
+  grid in m/s², its true rate from the pen's clock, gaps, clipping, a live level
+  (:class:`~realpen.device.capture.CaptureAssembler`), :func:`~realpen.device.capture.record`
+  and :func:`~realpen.device.capture.write_capture` (WAV, NPZ, CSV).
 - :mod:`~realpen.device.pattern` — a profile's tactile pattern as the int16 samples a pen plays.
 - :mod:`~realpen.device.sim` — :class:`~realpen.device.sim.SimPen`: the real firmware under the
   MicroPython Unix port on a pseudo-terminal.
@@ -23,12 +27,15 @@ from __future__ import annotations
 from realpen._lazy import lazy_attributes
 
 __all__ = ["DeviceError", "DeviceDisconnected", "Transport", "SerialTransport", "BleTransport",
-           "open_transport", "PenClient", "PenInfo", "PenEvent", "pen_pattern", "check_fits"]
+           "open_transport", "PenClient", "PenInfo", "PenEvent", "SampleBlock", "pen_pattern",
+           "check_fits", "Capture", "CaptureAssembler", "record", "write_capture"]
 
 _HOMES = {
     "DeviceError": "transport", "DeviceDisconnected": "transport", "Transport": "transport",
     "SerialTransport": "transport", "BleTransport": "transport", "open_transport": "transport",
-    "PenClient": "client", "PenInfo": "client", "PenEvent": "client",
+    "PenClient": "client", "PenInfo": "client", "PenEvent": "client", "SampleBlock": "client",
+    "Capture": "capture", "CaptureAssembler": "capture", "record": "capture",
+    "write_capture": "capture",
     "pen_pattern": "pattern", "check_fits": "pattern",
 }
 

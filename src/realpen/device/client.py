@@ -1,10 +1,11 @@
-"""Talk to a pen: HELLO, pattern upload, SET_STATE, PING and the pen's events.
+"""Talk to a pen: HELLO, pattern upload, SET_STATE, PING, the pen's events and its captures.
 
 :class:`PenClient` speaks the protocol (:mod:`realpen.device.protocol`, ``docs/protocol.md``)
 over any :class:`~realpen.device.transport.Transport`. A reader thread feeds the bytes that
 arrive to a :class:`~realpen.device.protocol.FrameDecoder`: a reply (INFO, ACK, NACK, PONG)
 wakes the request that carries the same sequence number, an EVENT is queued for
-:meth:`PenClient.read_event`. Frames the pen does not answer (PATTERN_CHUNK, SET_STATE) are only
+:meth:`PenClient.read_event`, a SAMPLES block of an accelerometer capture for
+:meth:`PenClient.read_samples`. Frames the pen does not answer (PATTERN_CHUNK, SET_STATE) are only
 answered when refused; such a NACK is kept until :meth:`PenClient.sync` (or the upload) reports
 it.
 
@@ -43,8 +44,8 @@ from realpen.device.pattern import check_fits, pattern_bytes
 from realpen.device.transport import UPLOAD_WINDOW, DeviceDisconnected, DeviceError, Transport
 from realpen.errors import ParameterError
 
-__all__ = ["PenClient", "PenInfo", "PenEvent", "state_payload", "DEFAULT_TIMEOUT_S", "SYNC_EVERY_CHUNKS",
-           "FEATURE_NAMES", "EVENT_NAMES"]
+__all__ = ["PenClient", "PenInfo", "PenEvent", "SampleBlock", "state_payload", "DEFAULT_TIMEOUT_S",
+           "SYNC_EVERY_CHUNKS", "FEATURE_NAMES", "EVENT_NAMES", "MAX_QUEUED_BLOCKS"]
 
 DEFAULT_TIMEOUT_S = DEVICE_TIMEOUT_S  # a reply takes ms over USB, tens of ms over Bluetooth
 # An upload waits for the pen (a PING) after this many chunks (≈ 2.9 KB), unless its transport
@@ -53,9 +54,15 @@ SYNC_EVERY_CHUNKS = UPLOAD_WINDOW
 STRAY_INFO_S = 0.2  # after a refused HELLO, how long to wait for an INFO that says the version
 _READ_S = 0.1  # how long one read of the reader thread waits: how fast close() is noticed
 _REPLIES = (p.INFO, p.ACK, p.NACK, p.PONG)
+# SAMPLES blocks held for read_samples: about 6.5 minutes of a 1344 Hz capture in blocks of 32
+# (more at the firmware's smaller blocks), some 8 MB. A host that falls further behind loses
+# the blocks that arrive while the queue is full; they are counted (PenClient.blocks_dropped)
+# and show as gaps.
+MAX_QUEUED_BLOCKS = 16384
 
 FEATURE_NAMES = {p.FEATURE_USB: "USB", p.FEATURE_BLE: "Bluetooth LE",
-                 p.FEATURE_BATTERY: "battery", p.FEATURE_RATE: "playback rate"}
+                 p.FEATURE_BATTERY: "battery", p.FEATURE_RATE: "playback rate",
+                 p.FEATURE_ACCEL: "accelerometer"}
 EVENT_NAMES = p.EVENT_NAMES
 FRAME_NAMES = p.TYPE_NAMES
 
@@ -112,7 +119,9 @@ class PenEvent:
     Attributes:
         kind: ``EV_*`` code.
         value: its value (boot: 0; underruns: the count so far; battery: the voltage in mV;
-            pattern: the id now playing; decode errors: frames dropped so far).
+            pattern: the id now playing; decode errors: frames dropped so far; overrun: the
+            sensor FIFO's overruns so far in this capture; capture_dropped: SAMPLES blocks the
+            pen could not send so far in this capture).
         seq: the pen's own frame counter.
         at: ``time.monotonic()`` when the host received it, in seconds.
     """
@@ -131,6 +140,50 @@ class PenEvent:
     def __str__(self) -> str:
         unit = " mV" if self.kind == p.EV_BATTERY else ""
         return f"{self.name} {self.value}{unit}"
+
+
+@dataclass(frozen=True, eq=False)
+class SampleBlock:
+    """One SAMPLES block of an accelerometer capture, as the pen sent it.
+
+    Attributes:
+        first: index of its first sample since CAPTURE_START, lost samples counted (u32: wraps
+            at 2³² samples, 37 days at 1344 Hz; :class:`realpen.device.capture.CaptureAssembler`
+            unwraps it).
+        t_us: the pen's clock in µs (the PONG clock, wrapping at 2³²) when it read the sensor's
+            FIFO level: its last sample had been taken by then.
+        range_g: the sensor's full-scale range in g.
+        flags: bit set of ``SAMPLES_*`` (``SAMPLES_OVERRUN``: the FIFO overran before this
+            block; samples were lost inside the sensor).
+        raw: the samples as the LIS3DH gives them, int16 of shape (n, 3) (x, y, z;
+            left-justified: see :func:`realpen.device.capture.accel_ms2`).
+        at: ``time.monotonic()`` when the host received it, in seconds.
+    """
+
+    first: int
+    t_us: int
+    range_g: int
+    flags: int
+    raw: np.ndarray
+    at: float
+
+    @classmethod
+    def from_payload(cls, payload: bytes, at: float) -> SampleBlock:
+        """Parse a SAMPLES payload received at ``at`` (ValueError when it is malformed)."""
+        first, t_us, range_g, flags, data = p.unpack_samples(payload)
+        raw = np.frombuffer(data, dtype="<i2").astype(np.int16).reshape(-1, 3)
+        raw.flags.writeable = False
+        return cls(first, t_us, range_g, flags, raw, at)
+
+    @property
+    def count(self) -> int:
+        """How many samples it holds."""
+        return int(self.raw.shape[0])
+
+    @property
+    def overrun(self) -> bool:
+        """Whether the sensor's FIFO overran before this block (samples lost)."""
+        return bool(self.flags & p.SAMPLES_OVERRUN)
 
 
 def state_payload(playing: bool, gain: float, rate: float = 1.0, fade_ms: int = 5) -> bytes:
@@ -188,6 +241,12 @@ class PenClient:
         self._pending: dict[int, _Waiter] = {}
         self._refusals: deque[tuple[int, int, int]] = deque(maxlen=64)  # (ftype, code, seq)
         self._events: queue.Queue[PenEvent] = queue.Queue()
+        # (capture, block): the capture a block belongs to is counted by the reader, from
+        # the ACK of each CAPTURE_START, so that the blocks of an earlier capture still on the
+        # way never pass for the new one's.
+        self._blocks: queue.Queue[tuple[int, SampleBlock]] = queue.Queue(MAX_QUEUED_BLOCKS)
+        self._blocks_dropped = 0
+        self._capture = 0
         self._tokens = itertools.count(1)
         # INFO frames nobody waited for, by seq: how a pen that refused HELLO says its version
         self._stray_info: dict[int, bytes] = {}
@@ -214,6 +273,12 @@ class PenClient:
     def decode_errors(self) -> int:
         """Frames from the pen the decoder dropped (garbled on the way)."""
         return self._decoder.errors
+
+    @property
+    def blocks_dropped(self) -> int:
+        """SAMPLES blocks of the current capture this host dropped because nobody read them
+        (more than :data:`MAX_QUEUED_BLOCKS` waiting); they show as gaps in the capture."""
+        return self._blocks_dropped
 
     def close(self) -> None:
         """Stop the reader and close the transport (again: nothing happens)."""
@@ -256,6 +321,18 @@ class PenClient:
                 return  # a malformed event says nothing; the frame's CRC was fine, so skip it
             self._events.put(PenEvent(kind, value, seq, time.monotonic()))
             return
+        if ftype == p.SAMPLES:
+            try:
+                block = SampleBlock.from_payload(payload, time.monotonic())
+            except ValueError:
+                return  # a malformed block: its samples show as a gap (its index is skipped)
+            try:
+                self._blocks.put_nowait((self._capture, block))
+            except queue.Full:
+                self._blocks_dropped += 1
+            return
+        if ftype == p.ACK and payload == p.pack_ack(p.CAPTURE_START):
+            self._capture += 1  # blocks from here on are the new capture's
         if ftype not in _REPLIES:
             return  # the pen sends nothing else; ignore what a newer firmware might add
         with self._lock:
@@ -597,3 +674,95 @@ class PenClient:
                 found.append(self._events.get_nowait())
             except queue.Empty:
                 return found
+
+    # -- accelerometer capture ---------------------------------------------------------------
+
+    def start_capture(self, range_g: int = 2, rate_hz: int = p.CAPTURE_RATE) -> None:
+        """Start the pen's accelerometer capture; its SAMPLES blocks then come to
+        :meth:`read_samples` (on this link only).
+
+        Blocks of an earlier capture not yet read are dropped, and :attr:`blocks_dropped`
+        starts again from 0.
+
+        Args:
+            range_g: full-scale range in g: 2, 4, 8 or 16.
+            rate_hz: the sensor's output rate in Hz (:data:`~realpen.device.protocol.CAPTURE_RATES`;
+                1344 is the method's).
+
+        Raises:
+            ParameterError: a range or rate the protocol does not offer.
+            DeviceError: the pen has no accelerometer, refused the range or rate, or did not
+                answer.
+        """
+        if range_g not in p.CAPTURE_RANGES:
+            raise ParameterError("range_g", f"must be one of "
+                                            f"{', '.join(map(str, p.CAPTURE_RANGES))} g, got "
+                                            f"{range_g!r}")
+        if rate_hz not in p.CAPTURE_RATES:
+            raise ParameterError("rate_hz", f"must be one of "
+                                            f"{', '.join(map(str, p.CAPTURE_RATES))} Hz, got "
+                                            f"{rate_hz!r}")
+        while True:  # what an earlier capture left behind is not this one's
+            try:
+                self._blocks.get_nowait()
+            except queue.Empty:
+                break
+        self._blocks_dropped = 0
+        ftype, payload = self._request(p.CAPTURE_START,
+                                       p.pack_capture_start(int(range_g), int(rate_hz)))
+        if ftype == p.NACK:
+            _, code = self._nack(payload, "CAPTURE_START")
+            raise self._capture_error(code)
+        if ftype != p.ACK:
+            raise self._unexpected("CAPTURE_START", ftype)
+
+    def _capture_error(self, code: int) -> DeviceError:
+        if code in (p.E_NO_SENSOR, p.E_UNKNOWN_TYPE):  # unknown type: firmware before capture
+            return DeviceError(f"{self.name}: the pen has no accelerometer")
+        if code == p.E_BAD_CAPTURE:
+            return DeviceError(f"{self.name}: the pen refused the capture: range or rate not "
+                               f"supported (ranges {'/'.join(map(str, p.CAPTURE_RANGES))} g, rates "
+                               f"{', '.join(map(str, p.CAPTURE_RATES))} Hz)")
+        return self._refused("the capture", code)
+
+    def read_samples(self, timeout: float | None = None) -> SampleBlock | None:
+        """The next SAMPLES block of the capture, waiting up to ``timeout`` seconds (None:
+        forever).
+
+        Returns:
+            A :class:`SampleBlock`, or None when none came within ``timeout``.
+
+        Raises:
+            DeviceDisconnected: the link went away and no block is left.
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            try:
+                capture, block = self._blocks.get(
+                    timeout=_READ_S if deadline is None else
+                    max(0.0, min(_READ_S, deadline - time.monotonic())))
+                if capture == self._capture:
+                    return block
+                continue  # an earlier capture's block, sent before the pen took the new start
+            except queue.Empty:
+                pass
+            self._check_link()
+            if deadline is not None and time.monotonic() >= deadline:
+                return None
+
+    def stop_capture(self, timeout: float | None = None) -> None:
+        """Stop the capture. The pen answers after its last block, so when this returns every
+        block of the capture is waiting for :meth:`read_samples`.
+
+        Args:
+            timeout: seconds to wait for the pen's answer (None: the client's timeout).
+
+        Raises:
+            DeviceError: the pen refused or did not answer.
+        """
+        ftype, payload = self._request(p.CAPTURE_STOP, p.pack_capture_stop(), timeout)
+        if ftype == p.NACK:
+            _, code = self._nack(payload, "CAPTURE_STOP")
+            raise self._capture_error(code)
+        if ftype != p.ACK:
+            raise self._unexpected("CAPTURE_STOP", ftype)

@@ -65,6 +65,7 @@ from realpen.io.recording import (
     NPZ_ERRORS,
     NPZ_METADATA,
     TIME_PATTERN,
+    audio_rate_units,
     axis_names,
     check_npz_method,
     npz_metadata,
@@ -74,6 +75,7 @@ from realpen.io.recording import (
     read_npz_array,
     wav_missing_bytes,
 )
+from realpen.io.timegrid import gap_refusal
 
 __all__ = ["RecordingStream", "ArrayStream", "open_stream", "MAX_STREAM_SAMPLES",
            "DEFAULT_BLOCK_FRAMES", "CSV_RATE_ROWS"]
@@ -318,6 +320,7 @@ class _AudioStream(RecordingStream):
         try:
             with sf.SoundFile(path) as handle:
                 rate, frames, channels = handle.samplerate, handle.frames, handle.channels
+                exact_rate, units = audio_rate_units(handle)  # a capture's rate is not whole
         except _AUDIO_ERRORS as error:
             raise self._unreadable(error) from None
         check_signal(path, rate, 0, channels)  # rate and channels; the length is ours
@@ -326,7 +329,7 @@ class _AudioStream(RecordingStream):
         if missing:
             raise fail(path, f"truncated: the WAV data chunk is {missing} bytes shorter than its "
                              f"header says")
-        self.rate, self.axes, self.units = float(rate), axis_names(channels), "full scale"
+        self.rate, self.axes, self.units = exact_rate, axis_names(channels), units
         self.frames = self.frames_hint = frames
 
     def _unreadable(self, error: Exception):
@@ -640,10 +643,7 @@ class _EvenGrid:
         if len(steps):
             widest = int(np.argmax(steps))
             if steps[widest] > GAP_FACTOR * self.step:
-                raise fail(self.path, f"time column '{self.name}' has a gap of "
-                                      f"{steps[widest]:.4g} s after {joined[widest]:.4g} s "
-                                      f"(samples are {self.step:.4g} s apart); analyse the "
-                                      f"parts on either side separately")
+                raise gap_refusal(self.path, self.name, steps[widest], joined[widest], self.step)
         if self.even and np.all(np.abs(steps - self.step) <= JITTER_TOLERANCE * self.step):
             self._keep(times, values)
             self.next_time = times[-1] + self.step

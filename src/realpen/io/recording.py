@@ -4,6 +4,12 @@ A :class:`Recording` is a block of samples (frames × axes) with its rate, axis 
 provenance. Loaders accept WAV/FLAC/OGG (any PCM or float subtype, any channel count), CSV (a
 header row, an optional time column) and NPZ.
 
+A WAV header holds a whole number of Hz; a capture from the pen's accelerometer
+(:func:`realpen.device.capture.write_capture`) runs at the sensor's own rate (1344 Hz ± a few per
+cent, estimated from the pen's clock), which it writes exactly in the JSON of the file's comment
+(``"format": "realpen-capture/1"``, ``rate_hz``, ``units``): the loaders take the rate and units
+from there (:func:`audio_rate_units`).
+
 Every loader checks what the file declares against :mod:`realpen.io.limits` (rate, channels,
 samples in all) before it allocates the samples, so a forged header or a compressed NPZ of
 zeros is refused in one line instead of exhausting memory.
@@ -38,14 +44,69 @@ from realpen.io.limits import (
     MAX_SAMPLE_MAGNITUDE,
     check_signal,
 )
+from realpen.io.timegrid import (
+    DEFAULT_MAX_INTERPOLATED_PCT,
+    gap_refusal,
+    grid_rate_choice,
+    place_on_grid,
+)
 
 __all__ = ["Recording", "load_recording", "as_recording", "save_npz", "AXIS_CHOICES",
+           "CAPTURE_FORMAT", "capture_metadata", "audio_rate_units",
            # the readers' parts that the block reader (realpen.io.blocks) shares
            "GAP_FACTOR", "JITTER_TOLERANCE", "TIME_PATTERN", "NPZ_METADATA", "NPZ_ERRORS",
            "axis_names", "wav_missing_bytes", "open_npz", "npz_metadata", "check_npz_method",
            "read_npz_array", "read_exactly", "read_npy_header"]
 
 AXIS_CHOICES = ("dft321", "x", "y", "z", "magnitude")
+CAPTURE_FORMAT = "realpen-capture/1"  # the "format" of a capture's JSON in its WAV comment
+_MAX_UNITS_CHARS = 32
+
+
+def capture_metadata(comment: str | None, header_rate: float) -> dict | None:
+    """The provenance a capture wrote into an audio file's comment, or None when the comment
+    is not one (any other text, or a ``rate_hz`` that is not the header's rate to within 1 Hz).
+
+    Args:
+        comment: the file's comment text.
+        header_rate: the rate in the file's header, in Hz (the capture's, rounded).
+
+    >>> capture_metadata('{"format": "realpen-capture/1", "rate_hz": 1366.85}', 1367)["rate_hz"]
+    1366.85
+    >>> capture_metadata("recorded on Tuesday", 1367) is None
+    True
+    """
+    if not comment or not comment.lstrip().startswith("{"):
+        return None
+    import json
+
+    try:
+        data = json.loads(comment)
+    except ValueError:
+        return None
+    if not isinstance(data, dict) or data.get("format") != CAPTURE_FORMAT:
+        return None
+    rate = data.get("rate_hz")
+    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or \
+            not math.isfinite(rate) or abs(rate - header_rate) > 1.0:
+        return None
+    units = data.get("units")
+    if not isinstance(units, str) or not 0 < len(units) <= _MAX_UNITS_CHARS:
+        data["units"] = "m/s^2"
+    return data
+
+
+def audio_rate_units(handle: sf.SoundFile) -> tuple[float, str]:
+    """(rate in Hz, units) of an open audio file: a capture's exact rate and units from its
+    comment (:func:`capture_metadata`), else the header's rate in "full scale"."""
+    try:
+        comment = handle.comment
+    except (sf.LibsndfileError, RuntimeError, UnicodeError, AttributeError):
+        comment = None
+    metadata = capture_metadata(comment, handle.samplerate)
+    if metadata is None:
+        return float(handle.samplerate), "full scale"
+    return float(metadata["rate_hz"]), metadata["units"]
 
 
 @dataclass(frozen=True)
@@ -190,7 +251,8 @@ def as_recording(data, rate: float | None = None, *, rate_parameter: str = "rate
 
 
 def load_recording(path: str | os.PathLike, rate: float | None = None,
-                   units: str | None = None) -> Recording:
+                   units: str | None = None, *, even_grid: bool | str | float | None = None,
+                   max_interpolated_pct: float = DEFAULT_MAX_INTERPOLATED_PCT) -> Recording:
     """Load a vibration recording from WAV/FLAC/OGG, CSV or NPZ.
 
     Args:
@@ -200,6 +262,14 @@ def load_recording(path: str | os.PathLike, rate: float | None = None,
             (ignored when the file carries its own rate, but always checked): ``MIN_RATE_HZ``
             to ``MAX_RATE_HZ`` (100 Hz to 400 kHz).
         units: override the unit of the samples.
+        even_grid: for a CSV with a time column whose samples have gaps (a phone's sensor
+            drops samples): True or ``"median"`` puts the samples on an even grid at the
+            median rate of the time column, a number in Hz at that rate (see
+            :func:`realpen.io.timegrid.place_on_grid`); the missing samples are interpolated
+            and the :class:`~realpen.io.timegrid.GridReport` is the last entry of the
+            recording's ``history``. None (default): a gap is refused, naming this option.
+        max_interpolated_pct: with ``even_grid``, refuse the file when more than this share
+            of its samples (per cent) is missing.
 
     Returns:
         A :class:`Recording` with ``source`` and ``sha256`` set.
@@ -210,15 +280,33 @@ def load_recording(path: str | os.PathLike, rate: float | None = None,
             (its rate, channels or samples, checked before they are read; a CSV's bytes, lines
             and fields; an NPZ's directory and arrays), naming the file and the limit.
         ParameterError: ``rate`` is not a number from ``MIN_RATE_HZ`` to ``MAX_RATE_HZ``, or is
-            needed (a CSV with no time column, an NPZ with no ``rate``) and not given.
+            needed (a CSV with no time column, an NPZ with no ``rate``) and not given;
+            ``even_grid`` is needed (a CSV whose time column has gaps) or given for a file
+            that has no time column.
+
+    Example:
+        >>> import tempfile, numpy as np
+        >>> t = np.delete(np.arange(800) / 400, [300, 301])  # a phone dropped two samples
+        >>> path = tempfile.mkdtemp() + "/phone.csv"
+        >>> np.savetxt(path, np.column_stack([t, np.sin(300 * t)]), fmt="%.6f", delimiter=",",
+        ...            header="time,z", comments="")
+        >>> recording = load_recording(path, even_grid=True)
+        >>> recording.samples.shape, round(recording.rate, 6)
+        ((800, 1), 400.0)
+        >>> print(recording.history[-1])  # doctest: +ELLIPSIS
+        put on an even grid at 400 Hz ...: 2 missing sample(s) interpolated, 0.25 % of 800; ...
     """
     path = Path(path)
     check_readable_file(path)
     if rate is not None:
         require_rate("rate", rate)
+    grid_rate = grid_rate_choice(even_grid)
     suffix = path.suffix.lower()
+    if grid_rate is not None and suffix != ".csv":
+        raise ParameterError("even_grid", f"applies to a CSV with a time column; {path} is "
+                                          f"not a CSV (its samples are evenly spaced)")
     if suffix == ".csv":
-        recording = _load_csv(path, rate)
+        recording = _load_csv(path, rate, grid_rate, max_interpolated_pct)
     elif suffix == ".npz":
         recording = _load_npz(path, rate)
     else:
@@ -242,7 +330,7 @@ def _load_audio(path: Path) -> Recording:
             # The header alone, before the samples are allocated (frames × channels float64).
             check_signal(path, handle.samplerate, expected, handle.channels)
             data = handle.read(dtype="float64", always_2d=True)
-            rate = handle.samplerate
+            rate, units = audio_rate_units(handle)
     except (sf.LibsndfileError, RuntimeError, TypeError, ValueError) as error:
         reason = str(error).split("\n")[0]
         raise fail(path, f"not a readable audio file ({reason})") from None
@@ -253,7 +341,7 @@ def _load_audio(path: Path) -> Recording:
         raise fail(path, f"truncated: the WAV data chunk is {missing} bytes shorter than its header says")
     channels = data.shape[1]
     axes = axis_names(channels)
-    return Recording(data, float(rate), axes, units="full scale")
+    return Recording(data, float(rate), axes, units=units)
 
 
 def wav_missing_bytes(path: Path) -> int:
@@ -275,7 +363,8 @@ JITTER_TOLERANCE = 0.01  # steps within 1 % of the median count as even sampling
 GAP_FACTOR = 2.0  # a step this many times the median is a gap: samples are missing
 
 
-def _load_csv(path: Path, rate: float | None) -> Recording:
+def _load_csv(path: Path, rate: float | None, grid_rate: bool | float | None = None,
+              max_interpolated_pct: float = DEFAULT_MAX_INTERPOLATED_PCT) -> Recording:
     # The one CSV reader: a header row, a sniffed delimiter (a decimal comma with ';'), blank
     # lines skipped, every value a finite number, messages naming the line.
     table = read_csv(path)
@@ -286,7 +375,17 @@ def _load_csv(path: Path, rate: float | None) -> Recording:
         times = values[:, time_index]
         values = np.delete(values, time_index, axis=1)
         time_name = header.pop(time_index)
+        if grid_rate is not None:
+            values, report = place_on_grid(times, values, rate=grid_rate, source=path,
+                                           time_name=time_name,
+                                           max_interpolated_pct=max_interpolated_pct)
+            if values.shape[1] == 0:
+                raise fail(path, "CSV has no signal columns")
+            return Recording(values, report.rate, tuple(header), history=(str(report),))
         rate, values = _even_sampling(path, time_name, times, values)
+    elif grid_rate is not None:
+        raise ParameterError("even_grid", f"applies to a CSV with a time column (t, time or "
+                                          f"timestamp); {path} has none")
     elif rate is None:
         # A missing argument, not bad data: the caller names its own way of giving ``rate``.
         raise ParameterError("rate", f"needed in Hz: {path} is a CSV with no time column "
@@ -309,9 +408,7 @@ def _even_sampling(path: Path, name: str, times: np.ndarray, values: np.ndarray
     step = float(np.median(steps))
     widest = int(np.argmax(steps))
     if steps[widest] > GAP_FACTOR * step:
-        raise fail(path, f"time column '{name}' has a gap of {steps[widest]:.4g} s after "
-                         f"{times[widest]:.4g} s (samples are {step:.4g} s apart); analyse the "
-                         f"parts on either side separately")
+        raise gap_refusal(path, name, steps[widest], times[widest], step)
     rate = 1.0 / step
     if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:  # before the interpolation allocates its grid
         raise fail(path, f"time column '{name}' gives a sampling rate of {rate:.4g} Hz, outside "
