@@ -238,6 +238,8 @@ def test_sim_says_when_its_firmware_dies_and_still_writes_the_wav(tmp_path):
                                text=True)
     try:
         port = process.stdout.readline().split(": ", 1)[1].strip()
+        sensor = process.stdout.readline()
+        assert "accelerometer: LIS3DH" in sensor, sensor
         hint = process.stdout.readline()
         assert f"--device serial:{port}" in hint and f"--port {port}" in hint, hint
         children = open(f"/proc/{process.pid}/task/{process.pid}/children").read().split()

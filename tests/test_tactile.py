@@ -286,7 +286,9 @@ def test_a_4_s_recording_serves_all_six_conditions_from_one_stretch():
     recording = stretch_recording()
     patterns = {key: build_pattern(recording, "flat", condition=key) for key in CONDITIONS}
     b = patterns["B"]
-    assert b.stretch_s[0] >= 1.2 - 1e-9 and b.stretch_s[1] <= 3.2 + 1e-9
+    # The stretch is chosen as the streamed analysis chooses it (the same units as `realpen
+    # analyze`); its units may start a few ms before the steady part, within one frame.
+    assert b.stretch_s[0] >= 1.2 - 0.005 and b.stretch_s[1] <= 3.2 + 0.005
     for key, pattern in patterns.items():
         assert pattern.duration_s == pytest.approx(1.5)
         assert pattern.stretch_s == pytest.approx(b.stretch_s), key

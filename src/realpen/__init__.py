@@ -110,23 +110,34 @@ def analyze(data, *, rate: float | None = None, unit_ms: float = 100.0, top: int
     """
     from realpen.dsp.filters import prepare
     from realpen.dsp.spectrum import analyze as analyze_signal
+    from realpen.dsp.stream import streamed_selection
     from realpen.io.recording import as_recording
 
     recording = as_recording(data, rate)
     prepared = prepare(recording, axis, analysis_rate, highpass_hz)
-    return analyze_signal(prepared.mono, prepared.rate, unit_ms, top, count, selection,
-                          fmin=highpass_hz if fmin is None else fmin, fmax=fmax,
-                          min_separation_hz=min_separation_hz, source=recording.source,
-                          progress=progress)
+    fmin = highpass_hz if fmin is None else fmin
+    analysis = analyze_signal(prepared.mono, prepared.rate, unit_ms, top, count, selection,
+                              fmin=fmin, fmax=fmax, min_separation_hz=min_separation_hz,
+                              source=recording.source, progress=progress)
+    # The units `realpen analyze` and `realpen tactile` select from the same file.
+    return streamed_selection(recording, analysis, axis=axis, analysis_rate=analysis_rate,
+                              highpass_hz=highpass_hz, fmin=fmin, fmax=fmax)
 
 
-def load_recording(path, *, rate: float | None = None, units: str | None = None):
+def load_recording(path, *, rate: float | None = None, units: str | None = None,
+                   even_grid=None, max_interpolated_pct: float = 5.0):
     """Load a vibration recording from WAV/FLAC/OGG, CSV or NPZ.
 
     Args:
         path: the file; its suffix picks the reader (``.csv``, ``.npz``, else audio).
         rate: sampling rate in Hz for a CSV with no time column or an NPZ with no ``rate``.
         units: the unit of the samples, overriding the file's (``"m/s^2"``, ``"g"``, ...).
+        even_grid: a CSV whose time column has gaps (a phone's sensor drops samples) is put
+            on an even grid: True or ``"median"`` at its median rate, a number at that rate in
+            Hz; the missing samples are interpolated and the report (share interpolated,
+            longest gap) is the last entry of ``history``. None: such a file is refused.
+        max_interpolated_pct: with ``even_grid``, refuse the file when more than this share
+            of its samples (per cent) is missing.
 
     Returns:
         A :class:`Recording` (samples of shape (frames, axes), rate, axes, units, provenance).
@@ -144,7 +155,8 @@ def load_recording(path, *, rate: float | None = None, units: str | None = None)
     """
     from realpen.io.recording import load_recording as load
 
-    return load(path, rate=rate, units=units)
+    return load(path, rate=rate, units=units, even_grid=even_grid,
+                max_interpolated_pct=max_interpolated_pct)
 
 
 def tactile_pattern(recording, *, actuator="lra:f0=175,q=8", condition: str | None = None,

@@ -40,6 +40,8 @@ DEFAULT_FLAGS: dict[str, str] = {
     "axis": "--axis",
     "analysis_rate": "--analysis-rate",
     "input_rate": "--input-rate",
+    "even_grid": "--even-grid",
+    "max_interpolated_pct": "--max-interpolated",
     # studies (realpen.study)
     "participants": "--participants",
     # statistics (realpen.stats)

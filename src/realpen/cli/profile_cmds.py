@@ -18,6 +18,7 @@ from realpen.cli.common import (
     print_line,
     progress_bar,
 )
+from realpen.cli.recording_options import even_grid_option, max_interpolated_option, read_recording
 from realpen.cli.sound_cmds import CROSSFADE_MS, UNIT_MS
 from realpen.cli.tactile_cmds import model_option, model_options
 from realpen.errors import RealPenError
@@ -40,7 +41,9 @@ def build(
         None, "--hatt", metavar="MODEL.xml",
         help="Instead of --vibration: a HaTT texture model; a pattern at every model vertex "
              "(those at speed 0 or force 0 are left out)."),
-    sound: Path = typer.Option(..., "--sound", help="Friction-sound recording (WAV/FLAC/OGG)."),
+    sound: Path | None = typer.Option(
+        None, "--sound", help="Friction-sound recording (WAV/FLAC/OGG). Without a vibration "
+                              "source: a sound-only pen; without --sound: a tactile-only pen."),
     output: Path | None = typer.Option(
         None, "-o", "--output", help="Bundle folder, or a .zip file (or --install)."),
     install: bool = typer.Option(
@@ -62,6 +65,8 @@ def build(
     axis: str | None = typer.Option(None, "--axis", help="dft321 | magnitude | x | y | z."),
     input_rate: float | None = typer.Option(None, "--input-rate",
                                             help="Rate in Hz of a vibration CSV without time."),
+    even_grid: str | None = even_grid_option(),
+    max_interpolated_pct: float = max_interpolated_option(),
     analysis_rate: float | None = typer.Option(None, "--analysis-rate",
                                                help="Resample the vibration to this rate first."),
     sound_unit_ms: float = typer.Option(UNIT_MS, "--sound-unit-ms", help="Sound loop unit in ms."),
@@ -75,12 +80,12 @@ def build(
     """Run the tactile and auditory pipelines and write a profile bundle atomically.
 
     The vibration is one recording (--vibration), recordings at several (speed, force) points
-    (--vibration-grid) or a HaTT texture model (--hatt). Says where the bundle went. With
-    --install it goes into your profiles folder, named after the profile.
+    (--vibration-grid) or a HaTT texture model (--hatt). Either part alone makes a pen: only
+    --sound, a sound-only pen (its vibration is silence); only a vibration source, a
+    tactile-only pen (its sound is silence). Says where the bundle went. With --install it goes
+    into your profiles folder, named after the profile.
     """
-    from realpen.io.blocks import open_stream
     from realpen.io.paths import user_profiles_dir
-    from realpen.io.recording import load_recording
     from realpen.motion.coupling import Coupling
     from realpen.profile import build_profile, save_profile
     from realpen.profile.build import check_name, read_grid_csv
@@ -90,9 +95,13 @@ def build(
 
     if install == (output is not None):
         raise RealPenError("profile build: give either -o/--output or --install")
-    if sum(given is not None for given in (vibration, vibration_grid, hatt)) != 1:
+    sources = sum(given is not None for given in (vibration, vibration_grid, hatt))
+    if sources > 1:
         raise RealPenError("profile build: give exactly one of --vibration, --vibration-grid "
-                           "and --hatt")
+                           "and --hatt (or none of them, with --sound, for a sound-only pen)")
+    if sources == 0 and sound is None:
+        raise RealPenError("profile build: give --sound, a vibration source (--vibration, "
+                           "--vibration-grid or --hatt), or both")
     if install:
         # The name becomes the folder's name: a valid name holds no path, checked before any work.
         output = user_profiles_dir() / check_name(name)
@@ -109,17 +118,22 @@ def build(
         check_outputs(output, force=force, folders=True, inputs={
             **inputs, **{f"grid recording {n + 1}": path for n, (_, _, path) in
                          enumerate(rows)}})
-        shake = [(speed, force_n, load_recording(path, rate=input_rate))
+        shake = [(speed, force_n, read_recording(path, input_rate, even_grid,
+                                                 max_interpolated_pct, stream=False))
                  for speed, force_n, path in rows]
         long = True
     elif hatt is not None:
         from realpen.datasets.hatt import load_hatt  # scipy.signal: only for a HaTT model
 
         shake, long = load_hatt(hatt), True
+    elif vibration is not None:
+        # Streamed: flat memory at any length (a CSV put on an even grid is loaded whole).
+        shake = read_recording(vibration, input_rate, even_grid, max_interpolated_pct,
+                               stream=even_grid is None)
+        long = (getattr(shake, "duration_hint", None) or shake.duration) > PROGRESS_AFTER_S
     else:
-        shake = open_stream(vibration, rate=input_rate)  # streamed: flat memory at any length
-        long = shake.duration_hint > PROGRESS_AFTER_S
-    noise = load_sound(sound)
+        shake, long = None, False
+    noise = load_sound(sound) if sound is not None else None
     with progress_bar("building", long) as progress:
         profile = build_profile(name, tool, shake, noise, response, params, sound_unit_ms,
                                 sound_crossfade_ms, constants, description, progress=progress)
@@ -174,15 +188,21 @@ def show(
     c = meta.coupling
     console.print(f"coupling: A_s = {c.c_p:g}·(P − {c.c_op:g}) + {c.c_x:g}·(v − {c.c_ov:g}), "
                   f"clamped to [0, {c.a_max:g}], smoothing {c.smoothing_ms:g} ms")
-    table = Table("sub-pattern", "frequencies Hz (amplitude)")
-    for index, sub in enumerate(meta.tactile.subpatterns):
-        table.add_row(str(index), "  ".join(f"{comp.frequency_hz:.1f} ({comp.amplitude:.3f})"
-                                            for comp in sub))
-    console.print(table)
-    for line in profile_lines(profile):
-        console.print(line)
-    console.print(f"sound unit: {meta.sound.unit_ms:g} ms from {meta.sound.start_s} s, seam level "
-                  f"jump {meta.sound.seam.get('level_jump_db', float('nan')):.2f} dB")
+    if profile.has_tactile:
+        table = Table("sub-pattern", "frequencies Hz (amplitude)")
+        for index, sub in enumerate(meta.tactile.subpatterns):
+            table.add_row(str(index), "  ".join(f"{comp.frequency_hz:.1f} "
+                                                f"({comp.amplitude:.3f})" for comp in sub))
+        console.print(table)
+        for line in profile_lines(profile):
+            console.print(line)
+    else:
+        console.print("tactile: none (a sound-only pen: its tactile pattern is silence)")
+    if profile.has_sound:
+        console.print(f"sound unit: {meta.sound.unit_ms:g} ms from {meta.sound.start_s} s, seam "
+                      f"level jump {meta.sound.seam.get('level_jump_db', float('nan')):.2f} dB")
+    else:
+        console.print("sound: none (a tactile-only pen: its sound unit is silence)")
     if plot is not None:
         from realpen.display.profile import save_profile_plot  # matplotlib is slow to import; only when asked
 

@@ -23,14 +23,16 @@ from realpen.cli.common import CONTEXT_SETTINGS
 __all__ = ["app", "build_app", "app_for", "COMMAND_MODULES", "COMMANDS"]
 
 COMMAND_MODULES = ("tactile_cmds", "sound_cmds", "profile_cmds", "serve_cmds", "export_cmds",
-                   "hatt_cmds", "study_cmds", "stats_cmds", "device_cmds")
+                   "hatt_cmds", "study_cmds", "stats_cmds", "device_cmds", "record_cmds",
+                   "actuator_cmds")
 """The modules of :mod:`realpen.cli` whose ``register(app)`` adds their commands, in the order
 of ``--help``."""
 
 COMMANDS = {"analyze": "tactile_cmds", "tactile": "tactile_cmds", "sound": "sound_cmds",
             "profile": "profile_cmds", "serve": "serve_cmds", "strokes": "serve_cmds",
             "export": "export_cmds", "hatt": "hatt_cmds", "study": "study_cmds",
-            "stats": "stats_cmds", "device": "device_cmds"}
+            "stats": "stats_cmds", "device": "device_cmds", "record": "record_cmds",
+            "actuator": "actuator_cmds"}
 """Each top-level command or group → the module that registers it."""
 
 

@@ -19,6 +19,7 @@ from realpen.cli.common import (
     progress_bar,
     whole_number,
 )
+from realpen.cli.recording_options import even_grid_option, max_interpolated_option, read_recording
 
 AXIS_HELP = "How axes become one: dft321 (default for several axes), magnitude, or x|y|z."
 # The study-1 conditions (principal frequencies × sub-patterns × unit length) and the model,
@@ -76,6 +77,8 @@ def analyze(
                                help="Which units: stationary (most stationary run) or middle."),
     rate: float | None = typer.Option(None, "--rate",
                                       help="Sampling rate in Hz of a CSV with no time column."),
+    even_grid: str | None = even_grid_option(),
+    max_interpolated_pct: float = max_interpolated_option(),
     analysis_rate: float | None = typer.Option(
         None, "--analysis-rate", help="Resample to this rate in Hz first (reads the whole "
                                       "recording into memory, within the in-memory limits)."),
@@ -96,18 +99,19 @@ def analyze(
 
     from realpen.dsp.filters import resample
     from realpen.dsp.stream import analyze_stream, combined_name
-    from realpen.io.blocks import ArrayStream, open_stream
+    from realpen.io.blocks import ArrayStream
     from realpen.io.files import atomic_path
-    from realpen.io.recording import load_recording
+    from realpen.io.recording import Recording, load_recording
 
     check_outputs(json_out, force=force, inputs={"recording": recording})
-    stream = open_stream(recording, rate=rate)
+    stream = read_recording(recording, rate, even_grid, max_interpolated_pct)
     rate_in, axes_in = stream.rate, stream.axes
     source = stream
     if analysis_rate is not None:
         # Resampling needs the whole signal: the in-memory path, with its limits.
-        loaded = resample(load_recording(recording, rate=rate), analysis_rate,
-                          parameter="analysis_rate")
+        whole = (Recording(stream.samples, stream.rate, stream.axes, stream.units, str(recording))
+                 if isinstance(stream, ArrayStream) else load_recording(recording, rate=rate))
+        loaded = resample(whole, analysis_rate, parameter="analysis_rate")
         source = ArrayStream(loaded.samples, loaded.rate, loaded.axes, source=str(recording))
     with progress_bar("analysing", stream.duration_hint > PROGRESS_AFTER_S) as progress:
         result = analyze_stream(source, unit_ms=unit_ms, top=top, count=subpatterns,
@@ -163,6 +167,8 @@ def tactile(
     axis: str | None = typer.Option(None, "--axis", help=AXIS_HELP),
     input_rate: float | None = typer.Option(
         None, "--input-rate", help="Sampling rate in Hz of a CSV with no time column."),
+    even_grid: str | None = even_grid_option(),
+    max_interpolated_pct: float = max_interpolated_option(),
     analysis_rate: float | None = typer.Option(None, "--analysis-rate",
                                                help="Resample to this rate in Hz first."),
     model: str | None = model_option(),
@@ -175,7 +181,6 @@ def tactile(
     """
     import numpy as np
 
-    from realpen.io.blocks import open_stream
     from realpen.io.files import json_text, wav_bytes, write_files
     from realpen.tactile.actuator import parse_actuator
     from realpen.tactile.build import build_pattern
@@ -190,10 +195,13 @@ def tactile(
                                    amplitude=amplitude, seed=seed, cap_db=cap_db,
                                    selection=select, highpass_hz=highpass_hz, axis=axis,
                                    analysis_rate=analysis_rate, **model_options(model, condition))
-    # Streamed: only the stretch the pattern is made of is ever held in memory.
-    stream = open_stream(recording, rate=input_rate)
-    with progress_bar("analysing", stream.duration_hint > PROGRESS_AFTER_S) as progress:
-        pattern = build_pattern(stream, response, params, progress)
+    # Streamed: only the stretch the pattern is made of is ever held in memory (a CSV put on an
+    # even grid is loaded whole: the grid needs all its timestamps).
+    source = read_recording(recording, input_rate, even_grid, max_interpolated_pct,
+                            stream=even_grid is None)
+    seconds = getattr(source, "duration_hint", None) or source.duration
+    with progress_bar("analysing", seconds > PROGRESS_AFTER_S) as progress:
+        pattern = build_pattern(source, response, params, progress)
     outputs = {output: wav_bytes(pattern.samples, pattern.rate)}
     if json_out is not None:
         outputs[json_out] = json_text(pattern.report(), json_out).encode("utf-8")

@@ -30,9 +30,16 @@ measurements): a tone's peak within 0.6 Hz and 0.75 dB on weak noise, 0.2 Hz and
 above the cutoff; on the bundled example 98.5 % of the top five peaks within 2 Hz, their powers
 0.05 dB apart in the median and 1 dB at the 99th percentile. Noise-like parts of a unit differ
 more, because the two are different estimates: the whole-signal DFT321 gives one noise
-realisation per unit, the sum of the axes' powers averages three. With one steadiest stretch both
-choose it; in a recording stationary throughout the two may pick runs a few units apart. The
-padding alone finds a pure tone within 0.003 of an unpadded bin and 0.02 dB.
+realisation per unit, the sum of the axes' powers averages three. The padding alone finds a pure
+tone within 0.003 of an unpadded bin and 0.02 dB.
+
+Which units are selected must not depend on how a recording is read: judged on the two
+estimates, a recording stationary throughout could have its steadiest run a few units apart
+(the bundled example: units 97–111 in memory, 100–114 streamed). So the stationary run is
+always judged here: the in-memory analyses (:func:`realpen.analyze`, and
+:func:`realpen.tactile.stretch.locate` for :func:`realpen.tactile_pattern`) keep the
+whole-signal method's peaks and take their selection from :func:`streamed_selection`, so
+``realpen analyze``, ``realpen tactile`` and ``rp.analyze`` select the same units.
 
 ``axis="magnitude"`` is done per unit too: the Euclidean norm of each frame is a per-frame
 quantity, and the unit's own trend replaces the recording's mean (the high-pass removes both).
@@ -44,6 +51,7 @@ whose frequencies, powers and band levels take 150 MB so, twice that as float64.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 
@@ -62,10 +70,10 @@ from realpen.dsp.spectrum import (
 )
 from realpen.errors import ParameterError, RealPenError, fail
 from realpen.io.blocks import ArrayStream, RecordingStream
-from realpen.io.recording import AXIS_CHOICES
+from realpen.io.recording import AXIS_CHOICES, Recording
 
-__all__ = ["analyze_stream", "analyze_units", "combined_name", "unit_fft_size", "UNIT_BATCH",
-           "SILENCE_DB", "TREND_ORDER"]
+__all__ = ["analyze_stream", "analyze_units", "streamed_selection", "combined_name",
+           "unit_fft_size", "UNIT_BATCH", "SILENCE_DB", "TREND_ORDER"]
 
 UNIT_BATCH = 512
 """Units transformed together: large enough to amortise numpy's per-call cost (some thirty
@@ -472,3 +480,63 @@ def analyze_units(samples: np.ndarray, rate: float, *, axes: tuple[str, ...] | N
         200.0
     """
     return analyze_stream(ArrayStream(samples, rate, axes, source), **options)
+
+
+def streamed_selection(recording: Recording, analysis: Analysis, *, axis: str | None = None,
+                       analysis_rate: float | None = None, highpass_hz: float = 30.0,
+                       fmin: float | None = None, fmax: float | None = None) -> Analysis:
+    """``analysis`` with the units a streamed analysis of the same recording selects.
+
+    The in-memory analysis (:func:`realpen.dsp.spectrum.analyze` of the prepared signal) and the
+    streamed one (:func:`analyze_stream`) judge stationarity on different estimates of each
+    unit's spectrum (see the module doc), so on a recording stationary throughout their
+    steadiest runs may lie a few units apart. The streamed judgement is the one both can make
+    (a file too long for memory is only ever streamed): here it is made on ``recording`` in
+    memory (:func:`analyze_units`, resampled first as ``realpen analyze --analysis-rate``
+    does), and ``analysis`` keeps its own peaks for every unit. ``"middle"`` needs nothing:
+    it is arithmetic on the unit count, the same in both.
+
+    Args:
+        recording: the recording ``analysis`` was made from (all its axes, its own rate).
+        analysis: its in-memory analysis, with the options below.
+        axis, analysis_rate, highpass_hz, fmin, fmax: as given to the in-memory analysis
+            (:func:`realpen.dsp.filters.prepare` and :func:`realpen.dsp.spectrum.analyze`).
+
+    Returns:
+        ``analysis`` with ``selected`` replaced (itself when nothing changes).
+
+    Raises:
+        RealPenError: no spectral peaks between ``fmin`` and ``fmax`` in the selected units.
+
+    Example:
+        >>> from realpen.dsp.filters import prepare
+        >>> from realpen.dsp.spectrum import analyze
+        >>> from realpen.examples import example_recording_path
+        >>> from realpen.io.recording import load_recording
+        >>> recording = load_recording(example_recording_path())
+        >>> whole = analyze(prepare(recording).mono, recording.rate)
+        >>> [int(i) for i in streamed_selection(recording, whole).selected[[0, -1]]]
+        [100, 114]
+    """
+    if analysis.selection != "stationary":
+        return analysis
+    source = recording
+    if analysis_rate is not None:
+        from realpen.dsp.filters import resample  # only to resample first, as prepare does
+
+        source = resample(recording, analysis_rate, parameter="analysis_rate")
+    count = len(analysis.selected)
+    streamed = analyze_units(source.samples, source.rate, axes=source.axes,
+                             source=recording.source, unit_ms=analysis.unit_ms, top=analysis.top,
+                             count=count, selection="stationary", fmin=fmin, fmax=fmax,
+                             highpass_hz=highpass_hz, axis=axis, keep_bands=False)
+    selected = streamed.selected
+    if selected[-1] >= len(analysis.starts_s) - 1:  # never the last unit of either count
+        selected = np.arange(len(analysis.starts_s) - 1 - count, len(analysis.starts_s) - 1)
+    if np.array_equal(selected, analysis.selected):
+        return analysis
+    if not np.isfinite(analysis.frequencies_hz[selected]).any():
+        raise RealPenError(f"{recording.source}: no spectral peaks between "
+                           f"{fmin if fmin is not None else highpass_hz:g} Hz and "
+                           f"{fmax or analysis.rate / 2:g} Hz in the selected units")
+    return replace(analysis, selected=selected)

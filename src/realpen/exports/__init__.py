@@ -140,7 +140,15 @@ def check_suffix(fmt: str, path: str | os.PathLike) -> None:
 
 def profile_inputs(profile) -> dict:
     """The export inputs of a pen profile: ``pattern``, ``sound`` (its loop), ``coupling``,
-    ``name``, ``tool`` and ``version`` (the profile's content version)."""
+    ``name``, ``tool`` and ``version`` (the profile's content version).
+
+    Raises:
+        RealPenError: a sound-only pen (no tactile part: every format exports a pattern).
+    """
+    if not profile.has_tactile:
+        raise fail(profile.path or profile.name, "is a sound-only pen (made without "
+                                                 "vibration): it has no tactile pattern to "
+                                                 "export")
     return {"pattern": profile.pattern, "sound": profile.sound_loop,
             "coupling": profile.coupling, "name": profile.name, "tool": profile.meta.tool,
             "version": profile.version}

@@ -2,6 +2,7 @@
 
 Lives here: :mod:`~realpen.io.recording` (the :class:`Recording` type and its loaders),
 :mod:`~realpen.io.blocks` (recordings read block by block, whatever their length),
+:mod:`~realpen.io.timegrid` (timestamped samples with dropped ones put on an even grid),
 :mod:`~realpen.io.csvtable` (the one CSV reader of numeric tables), :mod:`~realpen.io.files`
 (atomic, all-or-nothing outputs and WAV bytes), :mod:`~realpen.io.paths` (the user's folders).
 

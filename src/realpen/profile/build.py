@@ -11,6 +11,10 @@ and actuator, from recordings made at those points
 (:func:`~realpen.tactile.grid.grid_from_recordings`, and :func:`read_grid_csv` for the list of
 them) or from vibration synthesised at every vertex of a HaTT texture model
 (:func:`~realpen.tactile.grid.grid_from_hatt`).
+
+A pen may be made from one recording alone: the friction sound without vibration (a sound-only
+pen) or vibration without sound (a tactile-only pen). The part it lacks is bundled as silence
+and the profile says which part it has (``parts``; see :mod:`realpen.profile.schema`).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import numpy as np
 
 from realpen._version import __version__
 from realpen.checks import MAX_FORCE_N, MAX_GRID_POINTS, MAX_SPEED_MM_S
+from realpen.defaults import SOUND_RATE_HZ
 from realpen.errors import ParameterError, fail
 from realpen.io.blocks import RecordingStream
 from realpen.io.limits import read_bounded
@@ -35,6 +40,7 @@ from realpen.io.recording import Recording
 from realpen.profile.bundle import PenProfile, bundle_wavs
 from realpen.profile.schema import (
     NAME_PATTERN,
+    SILENT_DBFS,
     SOUND_WAV,
     TACTILE_WAV,
     BundleFiles,
@@ -48,14 +54,14 @@ from realpen.tactile.actuator import Actuator
 from realpen.tactile.build import build_pattern
 from realpen.tactile.conditions import TactileParams
 from realpen.tactile.grid import FULL_PRESSURE_FORCE_N, VibrationGrid, grid_from_hatt, grid_from_recordings
-from realpen.tactile.pattern import TactilePattern
+from realpen.tactile.pattern import Component, TactilePattern
 
 if TYPE_CHECKING:
     from realpen.datasets.hatt import HattModelSet
     from realpen.sound.loop import SoundLoop
 
 __all__ = ["build_profile", "profile_from_parts", "check_name", "read_grid_csv",
-           "MAX_GRID_CSV_BYTES"]
+           "silent_pattern", "MAX_GRID_CSV_BYTES"]
 
 MAX_GRID_CSV_BYTES = 1024 * 1024
 """The largest grid CSV read (bytes): a grid is at most 64 rows of a path and two numbers."""
@@ -78,7 +84,8 @@ def profile_from_parts(name: str, tool: str, pattern: TactilePattern, sound: np.
                        sound_rate: int, sound_section: dict, coupling, sources: list[SourceFile],
                        sound_parameters: dict, description: str = "",
                        model: dict | None = None, grid: VibrationGrid | None = None,
-                       notes: Sequence[str] = ()) -> PenProfile:
+                       notes: Sequence[str] = (), parts: Sequence[str] | None = None
+                       ) -> PenProfile:
     """Assemble a :class:`PenProfile` from a tactile pattern and a sound unit.
 
     Args:
@@ -96,6 +103,8 @@ def profile_from_parts(name: str, tool: str, pattern: TactilePattern, sound: np.
         grid: patterns at (speed, force) points (a format-3 profile); ``pattern`` must be its
             reference point's. A one-point grid is no grid: the profile stays format 2.
         notes: more notes for the provenance, after the pattern's own.
+        parts: the parts the pen has, when only one (``["tactile"]`` or ``["sound"]``; the
+            other is then silence, see :mod:`realpen.profile.schema`); None: both.
 
     Raises:
         ParameterError: a bad name, a pattern without an actuator, or a grid whose reference
@@ -120,6 +129,7 @@ def profile_from_parts(name: str, tool: str, pattern: TactilePattern, sound: np.
     params = pattern.params.to_json() if pattern.params is not None else {}
     meta = ProfileMeta(
         name=name, tool=tool, description=description,
+        parts=None if parts is None else list(parts),
         tactile=pattern,  # validation keeps the pattern's own fields (to_json), not its origin
         grid=grid,
         sound=SoundSection(rate=sound_rate, frames=len(sound), **sound_section),
@@ -134,10 +144,39 @@ def profile_from_parts(name: str, tool: str, pattern: TactilePattern, sound: np.
     return profile
 
 
+def silent_pattern(actuator: Actuator | str, params: TactileParams | None = None
+                   ) -> TactilePattern:
+    """The tactile pattern of a sound-only pen: silence as long as a pattern built with
+    ``params`` (one sub-pattern of one component of amplitude 0), equalised for ``actuator``.
+
+    Example:
+        >>> float(abs(silent_pattern("lra:f0=175,q=8").render()).max())
+        0.0
+    """
+    from realpen.tactile.actuator import parse_actuator
+
+    params = params or TactileParams()
+    actuator = parse_actuator(actuator) if isinstance(actuator, str) else actuator
+    length_ms = params.subpatterns * params.unit_ms
+    # Any frequency would do at amplitude 0; the actuator's own keeps the JSON meaningful.
+    frequency = float(actuator.params.get("f0", 175.0)) if actuator.params else 175.0
+    return TactilePattern([[Component(min(frequency, params.rate / 4), 0.0)]], params.rate,
+                          length_ms, params.boundary, params.crossfade_ms, actuator=actuator)
+
+
+def _silent_sound(unit_ms: float) -> tuple[np.ndarray, int, dict]:
+    """(samples, rate in Hz, sound section) of a tactile-only pen: ``unit_ms`` of zeros."""
+    frames = max(1, int(round(SOUND_RATE_HZ * unit_ms / 1000.0)))
+    section = {"mode": "loop", "unit_ms": unit_ms, "crossfade_ms": 0.0, "start_s": None,
+               "rms_dbfs": SILENT_DBFS, "seam": {}}
+    return np.zeros(frames, dtype=np.float32), SOUND_RATE_HZ, section
+
+
 def build_profile(name: str, tool: str,
                   vibration: Recording | RecordingStream | str | os.PathLike
-                  | Sequence[tuple[float, float, Recording]] | HattModelSet | VibrationGrid,
-                  sound: Recording | SoundLoop, actuator: Actuator | str,
+                  | Sequence[tuple[float, float, Recording]] | HattModelSet | VibrationGrid
+                  | None,
+                  sound: Recording | SoundLoop | None, actuator: Actuator | str,
                   tactile_params: TactileParams | None = None, unit_ms: float = 300.0,
                   crossfade_ms: float = 10.0, coupling=None, description: str = "",
                   model: dict | None = None, progress=None, *,
@@ -157,11 +196,16 @@ def build_profile(name: str, tool: str,
             texture model (:class:`~realpen.datasets.hatt.HattModelSet`,
             :func:`~realpen.tactile.grid.grid_from_hatt`), or a
             ready :class:`~realpen.tactile.grid.VibrationGrid` (its patterns are used as they
-            are; ``actuator`` and ``tactile_params`` are then ignored).
+            are; ``actuator`` and ``tactile_params`` are then ignored). None: a sound-only pen
+            (its tactile pattern is silence, :func:`silent_pattern`).
         sound: the pen's friction sound, mono, already at the profile's sound rate (Hz); or a
             ready :class:`~realpen.sound.loop.SoundLoop` (e.g. a WAV whose ``smpl`` chunk
             declares its loop, from :func:`~realpen.sound.loop.load_sound`), used as it is.
-        actuator: an :class:`~realpen.tactile.actuator.Actuator` or a spec string.
+            None: a tactile-only pen (its sound unit is ``unit_ms`` of silence at
+            :data:`~realpen.defaults.SOUND_RATE_HZ`). ``vibration`` and ``sound`` may not both
+            be None.
+        actuator: an :class:`~realpen.tactile.actuator.Actuator` or a spec string (a sound-only
+            pen keeps it too: the pen's actuator, for when a vibration is added).
         tactile_params: the tactile pipeline's parameters (default: condition B's).
         unit_ms, crossfade_ms: loop-unit length and wrap crossfade in ms.
         coupling: the Eq. 1 constants (default: ``Coupling()``, :class:`realpen.motion.coupling.Coupling`).
@@ -175,7 +219,8 @@ def build_profile(name: str, tool: str,
             (a ready grid keeps its own).
 
     Raises:
-        ParameterError: a bad name or parameter, named by its Python name.
+        ParameterError: a bad name or parameter, named by its Python name; ``vibration`` and
+            ``sound`` both None.
         RealPenError: a problem with a recording, naming it.
     """
     from realpen.datasets.hatt import HattModelSet
@@ -183,10 +228,15 @@ def build_profile(name: str, tool: str,
     from realpen.sound.loop import SoundLoop, find_loop_unit
 
     check_name(name)
+    if vibration is None and sound is None:
+        raise ParameterError("vibration", "and sound are both None; a pen needs a vibration "
+                                          "source, a sound recording, or both")
     coupling = Coupling() if coupling is None else coupling
     params = tactile_params or TactileParams()
     grid, notes = None, ()
-    if isinstance(vibration, (Recording, RecordingStream, str, os.PathLike)):
+    if vibration is None:
+        pattern, sources = silent_pattern(actuator, params), []
+    elif isinstance(vibration, (Recording, RecordingStream, str, os.PathLike)):
         pattern = build_pattern(vibration, actuator, params, progress)
         source = vibration.source if isinstance(vibration, (Recording, RecordingStream)) \
             else vibration
@@ -210,6 +260,10 @@ def build_profile(name: str, tool: str,
         sources = [SourceFile(**source) for source in grid.provenance.get("sources", [])]
         if grid.provenance.get("model") is not None:
             model = {**grid.provenance["model"], **(model or {})}
+    if sound is None:
+        samples, sound_rate, section = _silent_sound(unit_ms)
+        return profile_from_parts(name, tool, pattern, samples, sound_rate, section, coupling,
+                                  sources, {}, description, model, grid, notes, parts=["tactile"])
     if isinstance(sound, SoundLoop):  # a ready loop: used as it is
         unit = sound.normalised()
         sound_sha256 = sound.source_sha256
@@ -228,7 +282,8 @@ def build_profile(name: str, tool: str,
                               coupling, sources,
                               {"unit_ms": unit_ms, "crossfade_ms": crossfade_ms,
                                "scores": report.get("scores"), "rate": sound.rate},
-                              description, model, grid, notes)
+                              description, model, grid, notes,
+                              parts=["sound"] if vibration is None else None)
 
 
 # --- grids ---------------------------------------------------------------------------------------

@@ -191,21 +191,38 @@ class PenProfile:
             self.__dict__["_version"] = cached
         return cached[1]
 
+    @property
+    def has_tactile(self) -> bool:
+        """Whether the pen has a tactile pattern (False: a sound-only pen, whose
+        ``tactile.wav`` is silence; see :mod:`realpen.profile.schema`)."""
+        return self.meta.has_tactile
+
+    @property
+    def has_sound(self) -> bool:
+        """Whether the pen has a friction sound (False: a tactile-only pen, whose
+        ``sound.wav`` is silence)."""
+        return self.meta.has_sound
+
     def summary(self) -> str:
-        """One line: name, tool, components, lengths, grid points (if any), actuator."""
+        """One line: name, tool, components, lengths, grid points (if any), actuator; a part the
+        pen lacks is said to be so."""
         t, s = self.meta.tactile, self.meta.sound
         counts = {len(sub) for sub in t.subpatterns}
         grid = "" if self.meta.grid is None else f" at {len(self.meta.grid.points)} points"
-        return (f"{self.name}: {self.meta.tool}; tactile {len(t.subpatterns)}×{t.subpattern_ms:g} ms, "
-                f"{'/'.join(map(str, sorted(counts)))} components, {t.rate} Hz{grid}; sound "
-                f"{s.unit_ms:g} ms {s.mode} at {s.rate} Hz; actuator {self.meta.actuator.spec}")
+        tactile = (f"tactile {len(t.subpatterns)}×{t.subpattern_ms:g} ms, "
+                   f"{'/'.join(map(str, sorted(counts)))} components, {t.rate} Hz{grid}"
+                   if self.has_tactile else "no tactile part (a sound-only pen)")
+        sound = (f"sound {s.unit_ms:g} ms {s.mode} at {s.rate} Hz" if self.has_sound
+                 else "no sound part (a tactile-only pen)")
+        return f"{self.name}: {self.meta.tool}; {tactile}; {sound}; actuator {self.meta.actuator.spec}"
 
     def __repr__(self) -> str:
         t, s = self.meta.tactile, self.meta.sound
         tool = self.meta.tool if len(self.meta.tool) <= 40 else self.meta.tool[:37] + "..."
-        return (f"PenProfile({self.name!r}, {tool!r}, tactile {len(t.subpatterns)}×"
-                f"{t.subpattern_ms:g} ms at {t.rate} Hz, sound {s.unit_ms:g} ms at {s.rate} Hz, "
-                f"version {self.version})")
+        tactile = (f"tactile {len(t.subpatterns)}×{t.subpattern_ms:g} ms at {t.rate} Hz"
+                   if self.has_tactile else "no tactile")
+        sound = f"sound {s.unit_ms:g} ms at {s.rate} Hz" if self.has_sound else "no sound"
+        return f"PenProfile({self.name!r}, {tool!r}, {tactile}, {sound}, version {self.version})"
 
     def _current_meta(self, wavs: dict[str, bytes]) -> ProfileMeta:
         """``meta`` with ``files`` describing ``wavs``, checked against the samples."""

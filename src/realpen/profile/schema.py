@@ -25,12 +25,21 @@ sections, the actuator's ``table_*`` always present) is still read: :func:`upgra
 into format 2.
 
 Format 3 adds what format 2 cannot hold: a tactile pattern with a residual (its ``tactile``
-section then has a ``residual`` key) and a vibration grid (the ``grid`` section: patterns at
+section then has a ``residual`` key), a vibration grid (the ``grid`` section: patterns at
 several (speed, force) points, :class:`realpen.tactile.grid.VibrationGrid`; the reference
 point's pattern is the ``tactile`` section and ``tactile.wav``, the others are rendered from
-their JSON when needed). A profile with neither is written as format 2, byte for byte as
-before, so existing profiles and their versions do not change; :attr:`ProfileMeta.format` is
-always the lowest format that holds the profile.
+their JSON when needed) and a pen made from one recording alone (the ``parts`` key:
+``["sound"]`` for a sound-only pen, from a microphone alone; ``["tactile"]`` for a
+tactile-only pen, from an accelerometer alone). A profile with none of these is written as
+format 2, byte for byte as before, so existing profiles and their versions do not change;
+:attr:`ProfileMeta.format` is always the lowest format that holds the profile.
+
+The part a pen lacks is still in the bundle, as silence: a tactile
+pattern of one component of amplitude 0, or a sound unit of zeros. Every reader of profiles
+(the live page, the pen, the exports' loops) then plays the pen as it is — sound only, or
+vibration only — without a case of its own, while ``parts`` says what was recorded (the
+summary, ``profile show`` and the exports read it; :attr:`ProfileMeta.has_tactile`,
+:attr:`ProfileMeta.has_sound`).
 
 The profile's *version* (:func:`profile_version`) is the SHA-256 of a canonical form of the
 document without ``files`` (floats rounded to 9 significant digits, keys sorted, compact
@@ -81,7 +90,7 @@ __all__ = ["FORMAT", "READABLE_FORMATS", "NAME_PATTERN", "PROFILE_JSON", "TACTIL
            "SOUND_WAV", "BUNDLE_FILES", "ComponentModel", "TactileModel", "SoundSection",
            "GridPointSection", "GridSection", "needed_format", "WavFile", "BundleFiles",
            "SourceFile", "Provenance", "ProfileMeta", "model_of", "upgrade", "profile_version",
-           "MAX_WAV_FRAMES", "MAX_WAV_BYTES", "MAX_SECTION_MS"]
+           "MAX_WAV_FRAMES", "MAX_WAV_BYTES", "MAX_SECTION_MS", "PARTS", "SILENT_DBFS"]
 
 FORMAT = 3
 """The newest format written (a profile without residual and grid is still written as 2)."""
@@ -101,6 +110,12 @@ MAX_WAV_BYTES = 4 * MAX_WAV_FRAMES + 64 * 1024
 32-bit float plus 64 KiB for the header and chunks (``fmt``, ``smpl``, ``LIST``)."""
 MAX_SECTION_MS = 60_000.0
 """The longest sound unit or crossfade a ``profile.json`` may state (ms); a unit is 300 ms."""
+PARTS = ("tactile", "sound")
+"""What a pen profile renders: the tactile pattern and the friction sound."""
+SILENT_DBFS = -200.0
+"""The ``rms_dbfs`` stated for a silent sound unit (a tactile-only pen): the level of zeros is
+−∞ dB, which JSON cannot hold; −200 dBFS is far below any recording (24-bit PCM's floor is
+−144 dBFS)."""
 
 
 def _finite_number(value: Any) -> int | float:
@@ -251,11 +266,13 @@ GridField = Annotated[GridSection, BeforeValidator(_grid_json), AfterValidator(_
                       PlainSerializer(VibrationGrid.to_json)]
 
 
-def needed_format(pattern: TactilePattern, grid: VibrationGrid | None) -> int:
-    """The lowest format that holds a profile: 3 with a residual or a grid, else 2."""
+def needed_format(pattern: TactilePattern, grid: VibrationGrid | None,
+                  parts: list[str] | None = None) -> int:
+    """The lowest format that holds a profile: 3 with a residual, a grid or only one of the
+    two parts (``parts``), else 2."""
     residual = any(getattr(p, "residual", None) is not None
                    for p in (pattern, *(grid.patterns if grid is not None else ())))
-    return 3 if residual or grid is not None else 2
+    return 3 if residual or grid is not None or parts is not None else 2
 
 
 class WavFile(_Strict):
@@ -300,14 +317,18 @@ class ProfileMeta(_Strict):
     ``grid`` a :class:`~realpen.tactile.grid.VibrationGrid` or None (then left out of the
     JSON), ``actuator`` an :class:`~realpen.tactile.actuator.Actuator`, ``coupling`` a
     :class:`~realpen.motion.coupling.Coupling`. ``format`` is set to the lowest format that
-    holds the profile (:func:`needed_format`); a format-2 document with a residual or a grid
-    is refused.
+    holds the profile (:func:`needed_format`); a format-2 document with a residual, a grid or
+    ``parts`` is refused. ``parts`` is None for a pen with both parts (``["tactile",
+    "sound"]`` is read as None), else the one part it has; the other is silence (see the
+    module docstring).
     """
 
     format: Literal[2, 3] | None = None
     name: str = Field(pattern=NAME_PATTERN)
     tool: str
     description: str = ""
+    # The parts recorded, when the pen lacks one (left out of the JSON when it has both).
+    parts: list[Literal["tactile", "sound"]] | None = Field(None, min_length=1, max_length=2)
     tactile: TactileField
     grid: GridField | None = None
     sound: SoundSection
@@ -316,11 +337,27 @@ class ProfileMeta(_Strict):
     files: BundleFiles
     provenance: Provenance
 
+    @property
+    def has_tactile(self) -> bool:
+        """Whether the pen's tactile pattern was built from a vibration source (False: a
+        sound-only pen, whose ``tactile`` section is silence)."""
+        return self.parts is None or "tactile" in self.parts
+
+    @property
+    def has_sound(self) -> bool:
+        """Whether the pen's sound unit was cut from a recording (False: a tactile-only pen,
+        whose sound unit is silence)."""
+        return self.parts is None or "sound" in self.parts
+
     @model_validator(mode="after")
     def _format_and_grid(self) -> ProfileMeta:
-        needed = needed_format(self.tactile, self.grid)
+        if self.parts is not None:
+            parts = [part for part in PARTS if part in self.parts]
+            self.parts = None if len(parts) == len(PARTS) else parts
+        needed = needed_format(self.tactile, self.grid, self.parts)
         if self.format is not None and self.format < needed:
-            what = "a grid" if self.grid is not None else "a residual"
+            what = ("a grid" if self.grid is not None else "only one part" if self.parts
+                    else "a residual")
             raise ValueError(f"format: a profile with {what} is format {needed}, not "
                              f"{self.format}")
         self.format = needed
@@ -332,8 +369,9 @@ class ProfileMeta(_Strict):
     @model_serializer(mode="wrap")
     def _without_empty_grid(self, handler: SerializerFunctionWrapHandler) -> dict:
         data = handler(self)
-        if data.get("grid", 0) is None:  # format 2 has no grid key: its bytes stay as they were
-            del data["grid"]
+        for key in ("grid", "parts"):
+            if data.get(key, 0) is None:  # format 2 has neither key: its bytes stay as they were
+                del data[key]
         return data
 
     @model_validator(mode="after")

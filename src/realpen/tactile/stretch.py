@@ -19,12 +19,11 @@ chooses them) and the prepared samples of those units (their peaks, and for
   length (a day: about 100 MB of per-unit results); resampling (``analysis_rate``) is the one
   case still done in memory, because the streamed analysis works at the file's rate.
 
-Where the two differ: the streamed analysis judges stationarity from the axes' summed power
-spectra, the whole-signal one from the DFT321 signal's; with one clearly steadiest stretch both
-choose it, on a recording stationary throughout they may choose runs a few units apart
-(:mod:`realpen.dsp.stream` states how close). Given the same stretch, the peaks differ only by the
-DFT321 of an excerpt against that of the whole recording (``tests/test_tactile_stream.py``
-measures it).
+Both choose the same units: the stationary run is judged on the streamed analysis's estimate
+(the axes' summed unit spectra) in memory too (:func:`realpen.dsp.stream.streamed_selection`),
+so a recording gives the same stretch read either way. Given the same stretch, the peaks differ
+only by the DFT321 of an excerpt against that of the whole recording
+(``tests/test_tactile_stream.py`` measures it).
 """
 
 from __future__ import annotations
@@ -133,11 +132,17 @@ def locate(recording, params: TactileParams, *, input_rate: float | None = None,
 def _in_memory(recording: Recording, params: TactileParams, count: int,
                progress: ProgressCallback | None) -> Stretch:
     from realpen.dsp.filters import prepare
+    from realpen.dsp.stream import streamed_selection
 
     prepared = prepare(recording, params.axis, params.analysis_rate, params.highpass_hz)
     analysis = analyze(prepared.mono, prepared.rate, params.selection_unit_ms, params.top, count,
                        params.selection, fmin=params.highpass_hz, fmax=params.fmax_hz,
                        source=recording.source, progress=progress)
+    # The units a streamed file selects (realpen.dsp.stream): in memory or not, the same pattern.
+    analysis = streamed_selection(recording, analysis, axis=params.axis,
+                                  analysis_rate=params.analysis_rate,
+                                  highpass_hz=params.highpass_hz, fmin=params.highpass_hz,
+                                  fmax=params.fmax_hz)
     return Stretch(analysis, prepared.mono, prepared.rate, 0, recording.source,
                    _provenance(recording, int(recording.samples.shape[0]), prepared.history))
 
