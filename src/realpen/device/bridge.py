@@ -11,7 +11,10 @@ only queues the command and returns (microseconds); a worker thread talks to the
 - ``gain(origin, value)``: ``SET_STATE(playing=1, gain=value / a_max)``. Gains waiting behind
   each other are coalesced, the latest wins (``SET_STATE`` carries the whole state, so nothing
   is lost): a slow link never builds a backlog;
-- ``pen_up(origin)``: ``SET_STATE(playing=0, gain=0)``.
+- ``pen_up(origin)``: ``SET_STATE(playing=0, gain=0)``;
+- ``capture(sink)``: the pen's accelerometer captured on the worker thread, every SAMPLES block
+  and capture event handed to ``sink``, the commands above still applied between blocks, until
+  the returned :class:`CaptureRun` is stopped (the live app's "Record a pen" page).
 
 Commands keep their order. When the pen goes away (a write fails, the port hangs up, the
 ``PING`` sent after :data:`HEARTBEAT_S` idle gets no answer, or the pen reports a boot), the
@@ -41,8 +44,8 @@ import numpy as np
 
 from realpen.device.protocol import EV_BOOT
 
-__all__ = ["PenBridge", "port_connector", "RETRY_MIN_S", "RETRY_MAX_S", "HEARTBEAT_S", "LINK_CHECK_S",
-           "CLOSE_WAIT_S", "gain_fraction", "fade_ms"]
+__all__ = ["PenBridge", "CaptureRun", "port_connector", "RETRY_MIN_S", "RETRY_MAX_S", "HEARTBEAT_S",
+           "LINK_CHECK_S", "CLOSE_WAIT_S", "gain_fraction", "fade_ms"]
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +59,7 @@ CLOSE_WAIT_S = 3.0  # how long close() waits for the worker to silence the pen a
 HISTORY = 20  # status changes kept for GET /api/device
 PATTERN_CACHE = 8  # rendered patterns kept (by profile version and rate)
 FADE_MIN_MS, FADE_MAX_MS = 5, 65535  # SET_STATE fade_ms is a u16; the firmware ramps >= 5 ms
+CAPTURE_READ_S = 0.05  # a capture's read wait: how soon a stop or a page's command is handled
 
 
 def gain_fraction(value: float, a_max: float) -> float:
@@ -127,6 +131,52 @@ def _info_field(info, name: str, default=None):
     if isinstance(info, dict):
         return info.get(name, default)
     return getattr(info, name, default)
+
+
+class CaptureRun:
+    """An accelerometer capture the bridge runs for a caller (:meth:`PenBridge.capture`).
+
+    Attributes:
+        sink: called with each :class:`~realpen.device.client.SampleBlock`, on the bridge's
+            thread; it must return quickly.
+        range_g, rate_hz: what the capture asked the sensor for (g, Hz).
+        error: why the capture could not start or ended early (one line), else None.
+        info: the pen's INFO when the capture started (for the capture's provenance).
+        host_dropped: blocks the host's client dropped, unread, during the capture.
+    """
+
+    def __init__(self, sink: Callable[[object], object], range_g: int, rate_hz: int):
+        self.sink, self.range_g, self.rate_hz = sink, int(range_g), int(rate_hz)
+        self.error: str | None = None
+        self.info = None
+        self.host_dropped = 0
+        self.started = threading.Event()  # the pen acknowledged CAPTURE_START
+        self._stop = threading.Event()
+        self._done = threading.Event()
+
+    @property
+    def stopping(self) -> bool:
+        """Whether :meth:`stop` was asked."""
+        return self._stop.is_set()
+
+    @property
+    def done(self) -> bool:
+        """Whether the capture is over (stopped, refused or failed)."""
+        return self._done.is_set()
+
+    def finish(self, error: str | None = None) -> None:
+        """The capture is over (``error``: why, if it did not end as asked)."""
+        if error and self.error is None:
+            self.error = error
+        self._done.set()
+
+    def stop(self, timeout: float) -> str | None:
+        """Ask the capture to stop and wait (at most ``timeout`` s) until the pen's last block
+        has reached the sink. Returns :attr:`error` (None: all well)."""
+        self._stop.set()
+        if not self._done.wait(timeout):
+            return self.error or f"the pen did not end the capture within {timeout:g} s"
+        return self.error
 
 
 class _Want:
@@ -224,6 +274,26 @@ class PenBridge:
         if self.log is not None:
             self.log.pen_up(origin)
         self._queue(("up",))
+
+    def capture(self, sink: Callable[[object], object], *, range_g: int = 2,
+                rate_hz: int = 1344) -> CaptureRun:
+        """Capture the pen's accelerometer on the bridge's thread until the run is stopped.
+
+        Every SAMPLES block goes to ``sink`` as it arrives; meanwhile the page's commands still
+        reach the pen (between blocks), so a capture may run while the pattern plays.
+
+        Args:
+            sink: called with each :class:`~realpen.device.client.SampleBlock` (quickly).
+            range_g: the sensor's full-scale range in g (2, 4, 8, 16).
+            rate_hz: its output rate in Hz (1344: the method's).
+
+        Returns:
+            The :class:`CaptureRun`; :meth:`CaptureRun.stop` ends it. A pen that is not
+            connected, has no sensor or goes away ends it with its ``error`` set.
+        """
+        run = CaptureRun(sink, range_g, rate_hz)
+        self._queue(("capture", run))
+        return run
 
     def _queue(self, op: tuple) -> None:
         with self._cond:
@@ -438,6 +508,9 @@ class PenBridge:
     def _update(self, op: tuple) -> bool:
         """Apply ``op`` to what the pen should do; True if the pen must hear of it."""
         want = self._want
+        if op[0] == "capture":  # reached here only when there is no link to capture on
+            op[1].finish("the pen is not connected")
+            return False
         if op[0] == "down":
             _, profile, tactile = op
             coupling = profile.meta.coupling
@@ -455,11 +528,70 @@ class PenBridge:
         return was_playing
 
     def _apply(self, op: tuple) -> None:
+        if op[0] == "capture":
+            self._capture(op[1])
+            return
         send = self._update(op)
         if op[0] == "down":
             self._ensure_pattern(self._want.profile)
         if send:
             self._send_state()
+
+    def _capture(self, run: CaptureRun) -> None:
+        """Run a capture: start it, hand its blocks and the pen's events to the sink and apply
+        the page's commands between blocks until it is stopped, then stop it and hand over the
+        last blocks. A link that fails ends the capture and is dropped (the loop reconnects); a
+        pen that restarts ends it and is set up again."""
+        from realpen.errors import RealPenError
+
+        client = self._client
+        try:
+            client.start_capture(run.range_g, run.rate_hz)
+        except _disconnect_errors() as error:
+            run.finish(_one_line(error))
+            raise
+        except RealPenError as error:  # no sensor, a range it lacks: the link is fine
+            run.finish(_one_line(error))
+            return
+        run.info = self._info
+        run.started.set()
+        read_event = getattr(client, "read_event", None)
+        try:
+            while True:
+                block = client.read_samples(CAPTURE_READ_S)
+                if block is not None:
+                    run.sink(block)
+                while read_event is not None and (event := read_event(0)) is not None:
+                    if getattr(event, "kind", None) == EV_BOOT \
+                            and getattr(event, "at", 0) >= self._hello_at:
+                        run.finish("the pen restarted during the capture")
+                        self._status("the pen restarted; uploading its pattern again")
+                        self._hello()
+                        self._resync()
+                        return
+                    run.sink(event)  # overruns and dropped blocks, counted in the capture
+                with self._cond:
+                    ops = list(self._ops)
+                    self._ops.clear()
+                    closing = self._closing
+                for op in ops:
+                    if op[0] == "capture":  # one capture at a time
+                        op[1].finish("another capture is running")
+                    else:
+                        self._apply(op)
+                if run.stopping or closing:
+                    break
+            client.stop_capture()
+            while (block := client.read_samples(0)) is not None:
+                run.sink(block)
+            while read_event is not None and (event := read_event(0)) is not None:
+                run.sink(event)
+            run.host_dropped = int(getattr(client, "blocks_dropped", 0))
+        except BaseException as error:
+            run.finish(_one_line(error))
+            raise
+        run.finish()
+        self._ping_at = time.monotonic() + self._heartbeat_s
 
     def _send_state(self) -> None:
         want = self._want
@@ -551,7 +683,10 @@ class PenBridge:
                     ops = list(self._ops)
                     self._ops.clear()
                 for op in ops:
-                    self._apply(op)
+                    if op[0] == "capture":
+                        op[1].finish("the server is stopping")
+                    else:
+                        self._apply(op)
                 if self._want.playing:
                     self._want.playing, self._want.gain = False, 0.0
                     self._send_state()

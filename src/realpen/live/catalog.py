@@ -219,6 +219,25 @@ class Catalog:
         """The entry of a pen by name, or None."""
         return self.entries.get(name)
 
+    def add(self, path: Path, where: str = "user") -> CatalogEntry:
+        """Offer the profile at ``path`` from now on (one installed while the server runs),
+        after the others; one of the same name that is not bundled is replaced.
+
+        Raises:
+            RealPenError: the bundle does not load or its loops are too long to serve, or a
+                bundled pen has that name.
+        """
+        entry = CatalogEntry(load_profile(path), where)
+        entry.check()
+        name = entry.profile.name
+        held = self.entries.get(name)
+        if held is not None and held.where == "bundled":
+            raise fail(path, f"'{name}' is a bundled pen's name")
+        # A new dict, swapped in whole: routes iterate the entries on other threads.
+        self.entries = {**{key: e for key, e in self.entries.items() if key != name},
+                        name: entry}
+        return entry
+
     @property
     def names(self) -> list[str]:
         """The offered pens' names, bundled pens first."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import Depends
 from starlette.requests import HTTPConnection
@@ -81,6 +81,7 @@ class LiveState:
         final_counts: (strokes, samples) when the store closed.
         stopped: shut down (the store closed).
         count_problem: why ``final_counts`` is None after the shutdown.
+        recorder: the "Record a pen" page's session (takes, build), made at its first use.
     """
 
     settings: LiveSettings
@@ -95,6 +96,7 @@ class LiveState:
     pages: dict[str, Session] = field(default_factory=dict)  # page id → its live session
     final_counts: tuple[int, int] | None = None
     stopped: bool = False
+    recorder: Any = None
     count_problem: str | None = None
 
     def open_session(self) -> Session:
@@ -121,6 +123,9 @@ class LiveState:
         for session in list(self.sessions.values()):
             session.close_now()
         self.sessions.clear()
+        if self.recorder is not None:
+            # A take under way is stopped on the pen, and the takes' temporary files removed.
+            self.recorder.close()
         try:
             self.final_counts = self.store.count(SHUTDOWN_WAIT_S)
         except (*STORE_ERRORS, TimeoutError) as error:

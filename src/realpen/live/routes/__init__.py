@@ -6,6 +6,7 @@
 - :mod:`~realpen.live.routes.studies` — the study pages and HTTP API;
 - :mod:`~realpen.live.routes.qr` — the participant screen's address as a QR code;
 - :mod:`~realpen.live.routes.device` — the pen device, its command log, the pen patterns;
+- :mod:`~realpen.live.routes.record` — the "Record a pen" page: takes and the profile build;
 - :mod:`~realpen.live.routes.params` — no router: the integer URL parameters (digits only, in a
   range) that the routers share.
 
@@ -17,10 +18,10 @@ one handler that turns them into HTTP replies (:mod:`realpen.live.errors`).
 
 from __future__ import annotations
 
-from realpen.live.routes import device, pages, profiles, qr, strokes, studies
+from realpen.live.routes import device, pages, profiles, qr, record, strokes, studies
 
 __all__ = ["ROUTERS"]
 
 ROUTERS = (studies.router, qr.router, pages.router, profiles.router, device.router,
-           strokes.router)
+           record.router, strokes.router)
 """Every router, in the order the app includes them."""

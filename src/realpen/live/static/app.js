@@ -277,6 +277,22 @@ function buildPenPicker() {
   }));
 }
 
+// A pen built on the "Record a pen" page (another tab) is installed while this page is open:
+// look at the list again whenever the page comes back into view.
+async function refreshPens() {
+  if (document.visibilityState !== 'visible' || !state.ready) return;
+  try {
+    const list = await getJson('api/profiles');
+    const names = (/** @type {{name: string}[]} */ (list.profiles)).map((p) => p.name).join('\n');
+    if (names === state.profiles.map((p) => p.name).join('\n')) return;
+    state.profiles = list.profiles;
+    buildPenPicker();
+    mark('pens', state.pen);
+  } catch (error) {
+    console.warn('could not refresh the pens', error);
+  }
+}
+
 // ---- calibration --------------------------------------------------------------------------
 
 function setCalibration(pxPerMm, calibrated) {
@@ -539,6 +555,7 @@ async function start() {
     setTactileAudio(tactileParam ? tactileParam === 'audio' : config.tactile === 'audio');
     await startPen(query.get('pen') || saved.get('pen', null));
     state.ready = true;
+    document.addEventListener('visibilitychange', refreshPens);
   } catch (error) {
     state.error = String(error);
     $('hint').textContent = `Could not start: ${error.message || error}`;
