@@ -847,7 +847,6 @@ def test_web_bluetooth_under_chromium_emulation(browser, server):
 
 # ---- what the page says about the pen -------------------------------------------------------
 
-SHOTS = Path("/tmp/shots21")
 NOTHING_PLAYS = "Tactile: no pen connected and Tactile\u00a0\u2192\u00a0R is off \u2014 " \
                 "nothing plays the vibration"
 
@@ -863,8 +862,8 @@ def test_tactile_with_nothing_to_play_it_on_says_so(browser, server):
         page.wait_for_selector("#st-tactile", state="visible")
         assert page.text_content("#st-tactile") == NOTHING_PLAYS
         assert page.is_hidden("#st-gain")
-        SHOTS.mkdir(exist_ok=True)
-        page.screenshot(path=str(SHOTS / "h3_tactile_no_pen.png"))
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "pen-tactile-nothing-to-play.png"))
         page.click("#tactile-audio")
         page.wait_for_selector("#st-gain", state="visible")
         assert page.is_hidden("#st-tactile")
@@ -896,8 +895,8 @@ def test_the_pen_panel_names_the_servers_simulated_pen(browser, tmp_path, monkey
                                    ".textContent === 'Pen: RealPen (server, simulated)'",
                                    timeout=30_000)
             assert page.is_hidden("#st-tactile") and page.is_visible("#st-gain")
-            SHOTS.mkdir(exist_ok=True)
-            page.screenshot(path=str(SHOTS / "h3_pen_headline.png"))
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "pen-panel-headline.png"))
             assert problems == []
         finally:
             context.close()

@@ -4,13 +4,12 @@ simulated pen (its firmware under the MicroPython Unix port, with its simulated 
 
 One take records the sim pen's accelerometer through the server and the microphone on the page;
 it is kept, Build makes the pen, and the writing page's pen picker offers it at once. The
-screenshots of the take and of the picker after Build go to ``SHOTS`` (when that folder can be
-made) for a person to look at.
+screenshots of the take and of the picker after Build go to ``test-artifacts/`` (when that
+folder can be made) for a person to look at.
 """
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from pathlib import Path
@@ -26,7 +25,7 @@ if not CHROMIUM.exists():
     pytest.skip(CHROMIUM_MISSING, allow_module_level=True)
 pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
 
-SHOTS = Path(os.environ.get("REALPEN_SHOTS", "/tmp/shots21"))
+SHOTS = Path(__file__).resolve().parents[1] / "test-artifacts"
 NAME = "recorded-pencil"
 
 
@@ -109,13 +108,13 @@ def test_record_a_take_keep_it_build_and_the_pen_is_in_the_picker(chromium, serv
                                " return l && l.accel && l.accel.samples > 1344 * 2.5; }")
         page.wait_for_function("() => document.querySelector('#mic-level-value').textContent"
                                ".endsWith('dBFS')")
-        shot(page, "h5_record_take.png")
+        shot(page, "record-take.png")
         page.click("#record")  # Stop
         page.wait_for_selector("#takes-body tr[data-take] td:nth-child(4):has-text('dBFS')")
         row = page.locator("#takes-body tr[data-take]").first
         assert "Hz" in row.locator("td").nth(2).inner_text()  # the accelerometer's rate
         assert row.locator("input[type=checkbox]").is_checked()  # kept
-        shot(page, "h5_record_takes.png")
+        shot(page, "record-takes.png")
 
         page.fill("#name", NAME)
         page.select_option("#tool", "pencil")
@@ -126,7 +125,7 @@ def test_record_a_take_keep_it_build_and_the_pen_is_in_the_picker(chromium, serv
         page.wait_for_function("() => window.realpen && window.realpen.ready")
         button = page.locator(f"#pens button[data-value='{NAME}']")
         assert button.get_attribute("aria-checked") == "true"
-        shot(page, "h5_record_built.png")
+        shot(page, "record-built-pen-in-picker.png")
         assert not problems, problems
     finally:
         context.close()
