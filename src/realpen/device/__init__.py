@@ -28,7 +28,8 @@ from realpen._lazy import lazy_attributes
 
 __all__ = ["DeviceError", "DeviceDisconnected", "Transport", "SerialTransport", "BleTransport",
            "open_transport", "PenClient", "PenInfo", "PenEvent", "SampleBlock", "pen_pattern",
-           "check_fits", "Capture", "CaptureAssembler", "record", "write_capture"]
+           "check_fits", "Capture", "CaptureAssembler", "record", "write_capture",
+           "measure_actuator", "verify_actuator"]
 
 _HOMES = {
     "DeviceError": "transport", "DeviceDisconnected": "transport", "Transport": "transport",
@@ -36,6 +37,7 @@ _HOMES = {
     "PenClient": "client", "PenInfo": "client", "PenEvent": "client", "SampleBlock": "client",
     "Capture": "capture", "CaptureAssembler": "capture", "record": "capture",
     "write_capture": "capture",
+    "measure_actuator": "measure_actuator", "verify_actuator": "measure_actuator",
     "pen_pattern": "pattern", "check_fits": "pattern",
 }
 
