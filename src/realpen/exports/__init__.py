@@ -19,7 +19,7 @@ File names: each format is written to a file with its suffix (:data:`SUFFIXES`: 
 ``.h``, ``.ahap``, ``.haptic``, ``.json`` or ``.kt`` for ``android``, ``.hjif``; any case).
 :func:`export` refuses a path with another suffix — a WAV named ``x.mp3`` would be opened as
 MP3 by whoever receives it —, and :func:`format_for_suffix` names the format a path asks for
-(the command line infers ``--format`` with it).
+(the command line infers the format with it).
 
 Looping: the tactile pattern (1500 ms) loops while the pen moves. WAV (its ``smpl`` chunk and
 whole periods), C header and Android's ``createWaveform`` carry the loop; AHAP, ``.haptic``,

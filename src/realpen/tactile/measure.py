@@ -18,7 +18,7 @@ from the sweep itself.
   between (underruns) are left out or shifted back.
 - :func:`fit_resonance` — f0, Q and gain of |H| = g / √(1 + Q²(f/f0 − f0/f)²), fitted on
   log magnitude.
-- :func:`write_response_csv` — the CSV ``--actuator`` reads
+- :func:`write_response_csv` — the CSV :func:`realpen.tactile.actuator.load_measured` reads
   (:func:`realpen.tactile.actuator.load_measured`).
 
 The check that the measured response equalises the actuator is
@@ -60,7 +60,8 @@ __all__ = ["Sweep", "Response", "ResonanceFit", "sweep_pattern", "analyse_sweep"
 BAND_HZ = (20.0, 500.0)
 """The band :func:`analyse_sweep` reports, Hz (the method's tactile range)."""
 CSV_HEADER = ("frequency_hz", "response_db", "coherence", "distortion_db")
-"""Columns :func:`write_response_csv` writes; ``--actuator`` reads the first two."""
+"""Columns :func:`write_response_csv` writes; :func:`~realpen.tactile.actuator.load_measured`
+reads the first two."""
 
 _POINTS_PER_OCTAVE = 48
 _LINEAR_PRE_S = 0.05  # kept before the linear impulse response's peak (band-limited pre-ringing)
@@ -168,7 +169,8 @@ class Response:
 
     def to_actuator(self, spec: str = "measured response") -> Actuator:
         """The response as a measured :class:`~realpen.tactile.actuator.Actuator`
-        (normalised to peak 1), as :func:`write_response_csv` and ``--actuator`` would give
+        (normalised to peak 1), as :func:`write_response_csv` and
+        :func:`~realpen.tactile.actuator.load_measured` would give
         it; ``spec`` names it (the CSV's path, usually)."""
         return Actuator(spec, "measured", {}, self.frequency_hz.copy(), self.normalised)
 
@@ -606,7 +608,7 @@ def fit_resonance(frequency_hz: np.ndarray, magnitude: np.ndarray, *,
 # -- the CSV --------------------------------------------------------------------------------
 
 def write_response_csv(path: str | os.PathLike, response: Response) -> None:
-    """Write ``response`` as the CSV ``--actuator`` reads, atomically.
+    """Write ``response`` as the CSV :func:`~realpen.tactile.actuator.load_measured` reads, atomically.
 
     Columns (:data:`CSV_HEADER`): ``frequency_hz``, ``response_db`` (normalised to 0 dB at
     the peak), ``coherence`` (γ²) and ``distortion_db`` (empty where not measurable).
