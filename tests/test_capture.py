@@ -76,7 +76,9 @@ class SensorPen(Transport):
         self.rng = np.random.default_rng(seed)
         self.stop_after, self.on_blocks_sent = stop_after, on_blocks_sent
         self.pending = bytearray()
-        self.lock = threading.Lock()
+        # One lock for the pen's whole state: the reader thread makes blocks while the host's
+        # thread starts a new capture, and a block must be made before or after, never across.
+        self.lock = threading.RLock()
         self.received: list[int] = []
         self.seq = 0
         self.sent_blocks = 0
@@ -89,6 +91,10 @@ class SensorPen(Transport):
             self.pending += p.encode_frame(ftype, seq, payload)
 
     def write(self, data: bytes) -> None:
+        with self.lock:
+            self._write(data)
+
+    def _write(self, data: bytes) -> None:
         for ftype, seq, payload in p.FrameDecoder().feed(data):
             self.received.append(ftype)
             if ftype == p.HELLO:
@@ -139,10 +145,10 @@ class SensorPen(Transport):
         self.number += 1
 
     def read(self, timeout: float) -> bytes:
-        for _ in range(4):
-            if self.capturing and not self.paused:
-                self._next_block()
         with self.lock:
+            for _ in range(4):
+                if self.capturing and not self.paused:
+                    self._next_block()
             data, self.pending = bytes(self.pending), bytearray()
         if not data:
             time.sleep(0.002)
