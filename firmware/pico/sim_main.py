@@ -225,7 +225,7 @@ def run(options):
         def on_stall(us):
             trace.write({"event": "stall", "t_ns": time.time_ns(), "us": us})
 
-        clock = RealClock(STEADY_STEP_US, on_stall)
+        clock = RealClock(STEADY_STEP_US)  # stalls are traced from the boot line on
         # The pen's own clock (PONG, SAMPLES, when the FIFO is looked at) is the same clock.
         rp_pen.ticks_us = clock.now
     else:
@@ -251,6 +251,8 @@ def run(options):
     trace.write({"event": "boot", "t_ns": time.time_ns(), "sample": first, "rate": rate,
                  "block": config.BLOCK_SAMPLES})
     pen.boot()
+    if steady:
+        clock.on_stall = on_stall
     sink = Sink(pen, rate, config.BLOCK_SAMPLES, record, trace, clock, actuator)
     pump[0] = sink.pump
     capture_every_us = int(options.get("capture_every_ms", "0")) * 1000
